@@ -1,0 +1,51 @@
+# Everything runs in .venv, created and filled by scripts/bootstrap.sh on first
+# use (torch 2.13.0 CPU first, then `pip install -e ".[dev]"`). The stamp file
+# .venv/.installed makes later runs skip the install until pyproject.toml changes.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+
+VENV := .venv
+VPY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+PYTEST := $(VPY) -m pytest
+
+.PHONY: help demo test test-all lint venv clean
+
+help:
+	@echo "make demo      create .venv, install everything (torch 2.13.0 CPU first), run the main job"
+	@echo "make test      create .venv, install everything, run the test suite (not slow)"
+	@echo "make test-all  the test suite including slow physics validations"
+	@echo "make lint      ruff check + ruff format --check"
+	@echo "make venv      only create/update .venv"
+	@echo "make clean     remove .venv and caches"
+
+$(STAMP): pyproject.toml scripts/bootstrap.sh
+	VENV=$(VENV) scripts/bootstrap.sh
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/cnt-sim demo
+
+# pytest exits 5 when it collects no test; that must fail, not pass silently.
+define run_pytest
+	rc=0; $(PYTEST) $(1) || rc=$$?; \
+	if [[ $$rc -eq 5 ]]; then echo "make: pytest collected no tests (exit 5); failing" >&2; exit 1; fi; \
+	exit $$rc
+endef
+
+test: $(STAMP)
+	@$(call run_pytest,-m "not slow" -q)
+
+test-all: $(STAMP)
+	@$(call run_pytest,-q)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

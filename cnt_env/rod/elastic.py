@@ -1,0 +1,373 @@
+"""Stretching, bending and twisting: energies, forces and Hessians (physics.md §3).
+
+Formulas: Bergou et al. 2010 (forces) and Jawed, Novelia & O'Reilly, "A primer on the
+kinematics of discrete elastic rods" (2018) (curvature and twist Hessians).
+
+The bend-twist stencil of interior node i spans the 11 contiguous DOFs
+``q[4(i-1) : 4(i-1)+11] = (x_{i-1}, theta_{i-1}, x_i, theta_i, x_{i+1})``. It is computed in
+the reduced coordinates ``r = (e, f, theta_e, theta_f)`` with e = x_i - x_{i-1} and
+f = x_{i+1} - x_i, then mapped to the 11 DOFs (``_R_INDEX`` / ``_R_SIGN``).
+
+Energies (rest curvature and twist are zero; ``rest_lengths`` ebar_j on edges,
+``voronoi_lengths`` l_i on interior nodes):
+
+* stretch  E_s = 1/2 k_s sum_j (|e_j|/ebar_j - 1)^2 ebar_j
+* bend     E_b = 1/2 k_b sum_i (kappa1_i^2 + kappa2_i^2) / l_i
+* twist    E_t = 1/2 k_t sum_i twist_i^2 / l_i
+
+``force`` receives -dE/dq (added, not overwritten) and the band ``ab`` receives
++d^2E/dq^2 (added). Frames (d1, d2) must already be those of the current iterate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .banded import KL, KU
+from .frames import cross3, dot3
+
+_DIAG = KL + KU  # row of the main diagonal in band storage
+
+# For local DOF a (0..10): the two reduced coordinates it enters, with signs (a sign of
+# 0 marks an unused second slot, so the map is branch-free).
+# Reduced layout: e = r[0:3], f = r[3:6], theta_e = r[6], theta_f = r[7].
+_R_INDEX = np.array(
+    [
+        [0, 0], [1, 1], [2, 2],  # x_{i-1}: -e
+        [6, 6],  # theta_e
+        [0, 3], [1, 4], [2, 5],  # x_i: +e, -f
+        [7, 7],  # theta_f
+        [3, 3], [4, 4], [5, 5],  # x_{i+1}: +f
+    ],
+    dtype=np.int64,
+)  # fmt: skip
+_R_SIGN = np.array(
+    [
+        [-1.0, 0.0], [-1.0, 0.0], [-1.0, 0.0],
+        [1.0, 0.0],
+        [1.0, -1.0], [1.0, -1.0], [1.0, -1.0],
+        [1.0, 0.0],
+        [1.0, 0.0], [1.0, 0.0], [1.0, 0.0],
+    ]
+)  # fmt: skip
+
+
+@njit(cache=True)
+def stretch_energy(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, k_s: float) -> float:
+    energy = 0.0
+    for j in range(n_nodes - 1):
+        e0 = q[4 * j + 4] - q[4 * j]
+        e1 = q[4 * j + 5] - q[4 * j + 1]
+        e2 = q[4 * j + 6] - q[4 * j + 2]
+        strain = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / rest_lengths[j] - 1.0
+        energy += 0.5 * k_s * strain * strain * rest_lengths[j]
+    return energy
+
+
+@njit(cache=True)
+def bend_twist_energy(
+    kappa: np.ndarray,
+    twist: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    n_nodes: int,
+    k_b: float,
+    k_t: float,
+) -> float:
+    energy = 0.0
+    for i in range(1, n_nodes - 1):
+        energy += 0.5 * k_b * (kappa[i, 0] ** 2 + kappa[i, 1] ** 2) / voronoi_lengths[i]
+        energy += 0.5 * k_t * twist[i] ** 2 / voronoi_lengths[i]
+    return energy
+
+
+@njit(cache=True)
+def add_stretch(
+    q: np.ndarray,
+    n_nodes: int,
+    rest_lengths: np.ndarray,
+    k_s: float,
+    force: np.ndarray,
+    ab: np.ndarray,
+    with_hessian: bool,
+) -> None:
+    """Stretching force -dE_s/dq and Hessian; per edge, on the DOFs of its two nodes."""
+    for j in range(n_nodes - 1):
+        a = 4 * j  # first DOF of x_j; x_{j+1} starts at a + 4
+        e0 = q[a + 4] - q[a]
+        e1 = q[a + 5] - q[a + 1]
+        e2 = q[a + 6] - q[a + 2]
+        ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        t = (e0 / ln, e1 / ln, e2 / ln)
+        ebar = rest_lengths[j]
+        tension = k_s * (ln / ebar - 1.0)  # dE/d|e|
+        for k in range(3):
+            force[a + k] += tension * t[k]
+            force[a + 4 + k] -= tension * t[k]
+        if not with_hessian:
+            continue
+        # d2E/de2 = k_s/ebar t t^T + tension/|e| (I - t t^T)
+        c_par = k_s / ebar
+        c_perp = tension / ln
+        for k in range(3):
+            for m in range(3):
+                h = (c_par - c_perp) * t[k] * t[m]
+                if k == m:
+                    h += c_perp
+                ab[_DIAG + k - m, a + m] += h
+                ab[_DIAG + k - m, a + 4 + m] += h
+                ab[_DIAG + k - m - 4, a + 4 + m] -= h  # row a+k, col a+4+m
+                ab[_DIAG + k - m + 4, a + m] -= h  # row a+4+k, col a+m
+
+
+@njit(cache=True, inline="always")
+def _bend_twist_reduced(
+    e: np.ndarray,
+    f: np.ndarray,
+    m1e: np.ndarray,
+    m2e: np.ndarray,
+    m1f: np.ndarray,
+    m2f: np.ndarray,
+    twist: float,
+    l_i: float,
+    k_b: float,
+    k_t: float,
+    g: np.ndarray,
+    h: np.ndarray,
+    gk1: np.ndarray,
+    gk2: np.ndarray,
+    gtw: np.ndarray,
+    ws: np.ndarray,
+    with_hessian: bool,
+) -> None:
+    """Gradient g (8) and Hessian h (8x8) of the bend+twist energy of one interior node
+    in the reduced coordinates (e, f, theta_e, theta_f). gk1/gk2/gtw (8) are scratch;
+    ws is a (9, 3) scratch of 3-vectors. Only the upper triangle of h is filled (the
+    Hessian is symmetric; the caller mirrors it).
+    """
+    te = ws[0]
+    tf = ws[1]
+    kb = ws[2]
+    tt = ws[3]  # tilde t
+    d1t = ws[4]  # tilde d1
+    d2t = ws[5]  # tilde d2
+    tmp = ws[6]
+    tmp2 = ws[7]
+    ne = math.sqrt(dot3(e, e))
+    nf = math.sqrt(dot3(f, f))
+    # reciprocals hoisted: without fastmath LLVM keeps every division
+    ine = 1.0 / ne
+    inf_ = 1.0 / nf
+    for k in range(3):
+        te[k] = e[k] * ine
+        tf[k] = f[k] * inf_
+    chi = 1.0 + dot3(te, tf)
+    ichi = 1.0 / chi
+    cross3(te, tf, kb)
+    for k in range(3):
+        kb[k] *= 2.0 * ichi
+        tt[k] = (te[k] + tf[k]) * ichi
+        d1t[k] = (m1e[k] + m1f[k]) * ichi
+        d2t[k] = (m2e[k] + m2f[k]) * ichi
+    kappa1 = 0.5 * (dot3(kb, m2e) + dot3(kb, m2f))
+    kappa2 = -0.5 * (dot3(kb, m1e) + dot3(kb, m1f))
+
+    # --- first derivatives (Bergou 2010 §4.2; primer eqs. for d kappa / d e) ---
+    cross3(tf, d2t, tmp)
+    cross3(te, d2t, tmp2)
+    for k in range(3):
+        gk1[k] = (-kappa1 * tt[k] + tmp[k]) * ine
+        gk1[3 + k] = (-kappa1 * tt[k] - tmp2[k]) * inf_
+    cross3(tf, d1t, tmp)
+    cross3(te, d1t, tmp2)
+    for k in range(3):
+        gk2[k] = (-kappa2 * tt[k] - tmp[k]) * ine
+        gk2[3 + k] = (-kappa2 * tt[k] + tmp2[k]) * inf_
+    gk1[6] = -0.5 * dot3(kb, m1e)
+    gk1[7] = -0.5 * dot3(kb, m1f)
+    gk2[6] = -0.5 * dot3(kb, m2e)
+    gk2[7] = -0.5 * dot3(kb, m2f)
+    # d(reference twist)/de = kb / (2|e|), d/df = kb / (2|f|)  (Bergou 2010 eq. 9)
+    for k in range(3):
+        gtw[k] = 0.5 * kb[k] * ine
+        gtw[3 + k] = 0.5 * kb[k] * inf_
+    gtw[6] = -1.0
+    gtw[7] = 1.0
+
+    cb = k_b / l_i
+    ct = k_t / l_i
+    for a in range(8):
+        g[a] = cb * (kappa1 * gk1[a] + kappa2 * gk2[a]) + ct * twist * gtw[a]
+    if not with_hessian:
+        return
+    for a in range(8):
+        for b in range(a, 8):
+            h[a, b] = cb * (gk1[a] * gk1[b] + gk2[a] * gk2[b]) + ct * gtw[a] * gtw[b]
+
+    # --- cb * kappa * (second derivatives of kappa1 and kappa2) (primer). kappa2's
+    # formulas are kappa1's with d2 -> d1 and the sign sgn flipped on the terms odd in
+    # the director; the edge-theta terms have one form with om = m1 (kappa1), m2 (kappa2).
+    ine2 = ine * ine
+    inf2 = inf_ * inf_
+    inef = ine * inf_
+    for pass_ in range(2):
+        if pass_ == 0:
+            kap = kappa1
+            sgn = 1.0
+            dtl = d2t
+            mfe = m2e
+            mff = m2f
+            ome = m1e
+            omf = m1f
+            h[6, 6] += cb * kap * (-0.5 * dot3(kb, m2e))
+            h[7, 7] += cb * kap * (-0.5 * dot3(kb, m2f))
+        else:
+            kap = kappa2
+            sgn = -1.0
+            dtl = d1t
+            mfe = m1e
+            mff = m1f
+            ome = m2e
+            omf = m2f
+            h[6, 6] += cb * kap * (0.5 * dot3(kb, m1e))
+            h[7, 7] += cb * kap * (0.5 * dot3(kb, m1f))
+        w = cb * kap
+        cross3(tf, dtl, tmp)  # tf x tilde_d
+        cross3(te, dtl, tmp2)  # te x tilde_d
+        for k in range(3):
+            for m in range(k, 3):
+                ttkm = tt[k] * tt[m]
+                # D2/De2
+                h[k, m] += (
+                    w
+                    * ine2
+                    * (
+                        2.0 * kap * ttkm
+                        - sgn * (tmp[k] * tt[m] + tt[k] * tmp[m])
+                        + kap * ichi * te[k] * te[m]
+                        + 0.25 * sgn * (kb[k] * mfe[m] + mfe[k] * kb[m])
+                    )
+                )
+                # D2/Df2
+                h[3 + k, 3 + m] += (
+                    w
+                    * inf2
+                    * (
+                        2.0 * kap * ttkm
+                        + sgn * (tmp2[k] * tt[m] + tt[k] * tmp2[m])
+                        + kap * ichi * tf[k] * tf[m]
+                        + 0.25 * sgn * (kb[k] * mff[m] + mff[k] * kb[m])
+                    )
+                )
+            h[k, k] -= w * kap * ichi * ine2
+            h[3 + k, 3 + k] -= w * kap * ichi * inf2
+            # D2/DeDf (full off-diagonal block)
+            for m in range(3):
+                h[k, 3 + m] += (
+                    w
+                    * inef
+                    * (
+                        -kap * ichi * te[k] * tf[m]
+                        + 2.0 * kap * tt[k] * tt[m]
+                        - sgn * tmp[k] * tt[m]
+                        + sgn * tt[k] * tmp2[m]
+                    )
+                )
+            h[k, 3 + k] -= w * kap * ichi * inef
+        # - sgn [tilde_d]_x / (|e||f|)
+        c = -w * sgn * inef
+        h[0, 4] += -c * dtl[2]
+        h[0, 5] += c * dtl[1]
+        h[1, 3] += c * dtl[2]
+        h[1, 5] += -c * dtl[0]
+        h[2, 3] += -c * dtl[1]
+        h[2, 4] += c * dtl[0]
+        # edge-theta
+        for col in range(6, 8):
+            om = ome if col == 6 else omf
+            cross3(tf, om, tmp)
+            cross3(te, om, tmp2)
+            s_om = 0.5 * dot3(kb, om)
+            for k in range(3):
+                h[k, col] += w * (s_om * tt[k] - tmp[k] * ichi) * ine
+                h[3 + k, col] += w * (s_om * tt[k] + tmp2[k] * ichi) * inf_
+
+    # --- ct * twist * (Hessian of the reference twist) (primer) ---
+    w = ct * twist
+    for k in range(3):
+        tmp[k] = te[k] + tt[k]
+        tmp2[k] = tf[k] + tt[k]
+    c = 0.5 * w * inef
+    for k in range(3):
+        for m in range(k, 3):
+            h[k, m] -= 0.25 * w * ine2 * (kb[k] * tmp[m] + tmp[k] * kb[m])
+            h[3 + k, 3 + m] -= 0.25 * w * inf2 * (kb[k] * tmp2[m] + tmp2[k] * kb[m])
+        for m in range(3):
+            h[k, 3 + m] -= c * kb[k] * tt[m]
+    # + c (2/chi) [te]_x
+    c2 = 2.0 * c * ichi
+    h[0, 4] += -c2 * te[2]
+    h[0, 5] += c2 * te[1]
+    h[1, 3] += c2 * te[2]
+    h[1, 5] += -c2 * te[0]
+    h[2, 3] += -c2 * te[1]
+    h[2, 4] += c2 * te[0]
+
+
+@njit(cache=True)
+def add_bend_twist(
+    q: np.ndarray,
+    n_nodes: int,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    twist: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_b: float,
+    k_t: float,
+    force: np.ndarray,
+    ab: np.ndarray,
+    with_hessian: bool,
+) -> None:
+    """Bending and twisting force -dE/dq and Hessian over all interior nodes."""
+    e = np.empty(3)
+    f = np.empty(3)
+    g = np.empty(8)
+    h = np.zeros((8, 8))
+    gk1 = np.empty(8)
+    gk2 = np.empty(8)
+    gtw = np.empty(8)
+    ws = np.empty((9, 3))
+    for i in range(1, n_nodes - 1):
+        a0 = 4 * (i - 1)
+        for k in range(3):
+            e[k] = q[a0 + 4 + k] - q[a0 + k]
+            f[k] = q[a0 + 8 + k] - q[a0 + 4 + k]
+        _bend_twist_reduced(
+            e, f, m1[i - 1], m2[i - 1], m1[i], m2[i], twist[i], voronoi_lengths[i],
+            k_b, k_t, g, h, gk1, gk2, gtw, ws, with_hessian,
+        )  # fmt: skip
+        for a in range(11):
+            force[a0 + a] -= _R_SIGN[a, 0] * g[_R_INDEX[a, 0]] + _R_SIGN[a, 1] * g[_R_INDEX[a, 1]]
+        if not with_hessian:
+            continue
+        for a in range(8):  # mirror the upper triangle
+            for b in range(a):
+                h[a, b] = h[b, a]
+        # H_q = T^T H_r T, each local DOF a = s0 r[i0] + s1 r[i1] (s1 = 0 when single)
+        for a in range(11):
+            ia0 = _R_INDEX[a, 0]
+            ia1 = _R_INDEX[a, 1]
+            sa0 = _R_SIGN[a, 0]
+            sa1 = _R_SIGN[a, 1]
+            for b in range(a, 11):
+                ib0 = _R_INDEX[b, 0]
+                ib1 = _R_INDEX[b, 1]
+                sb0 = _R_SIGN[b, 0]
+                sb1 = _R_SIGN[b, 1]
+                hab = (sa0 * (sb0 * h[ia0, ib0] + sb1 * h[ia0, ib1])
+                       + sa1 * (sb0 * h[ia1, ib0] + sb1 * h[ia1, ib1]))  # fmt: skip
+                ab[_DIAG + a - b, a0 + b] += hab
+                if b != a:
+                    ab[_DIAG + b - a, a0 + a] += hab

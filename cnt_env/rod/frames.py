@@ -1,0 +1,224 @@
+"""Frames and strains of the discrete elastic rod (physics.md §3; Bergou et al. 2010).
+
+Arrays (see ``cnt_env/rod/__init__.py`` for the shared layout):
+
+=================  ==================  ==========================================
+name               shape               lives on
+=================  ==================  ==========================================
+``q``              (4 n_nodes - 1,)    interleaved DOFs
+``tangents``       (n_edges, 3)        edges, unit vectors
+``edge_lengths``   (n_edges,)          edges, current |e_j|
+``d1``, ``d2``     (n_edges, 3)        edges, reference directors (d2 = t x d1)
+``m1``, ``m2``     (n_edges, 3)        edges, material directors
+``ref_twist``      (n_nodes,)          interior nodes (0 and n_nodes-1 unused)
+``kb``             (n_nodes, 3)        interior nodes, curvature binormal
+``kappa``          (n_nodes, 2)        interior nodes, material curvatures
+``twist``          (n_nodes,)          interior nodes
+=================  ==================  ==========================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# Below this |t_a x t_b| the transport is the identity (tangents parallel).
+PARALLEL_EPS = 1e-15
+
+
+@njit(cache=True, inline="always")
+def dot3(a: np.ndarray, b: np.ndarray) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def cross3(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    c0 = a[1] * b[2] - a[2] * b[1]
+    c1 = a[2] * b[0] - a[0] * b[2]
+    c2 = a[0] * b[1] - a[1] * b[0]
+    out[0] = c0
+    out[1] = c1
+    out[2] = c2
+
+
+@njit(cache=True)
+def parallel_transport(u: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, out: np.ndarray) -> None:
+    """Rotate ``u`` about t_a x t_b by the angle that takes unit t_a to unit t_b.
+
+    Identity when t_a and t_b are parallel. ``out`` may alias ``u``.
+    """
+    b0 = t_a[1] * t_b[2] - t_a[2] * t_b[1]
+    b1 = t_a[2] * t_b[0] - t_a[0] * t_b[2]
+    b2 = t_a[0] * t_b[1] - t_a[1] * t_b[0]
+    nb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+    if nb < PARALLEL_EPS:
+        out[0] = u[0]
+        out[1] = u[1]
+        out[2] = u[2]
+        return
+    b0 /= nb
+    b1 /= nb
+    b2 /= nb
+    # orthonormal bases (t_a, n_a, b) and (t_b, n_b, b) with n = t x b
+    na0 = t_a[1] * b2 - t_a[2] * b1
+    na1 = t_a[2] * b0 - t_a[0] * b2
+    na2 = t_a[0] * b1 - t_a[1] * b0
+    nb0 = t_b[1] * b2 - t_b[2] * b1
+    nb1 = t_b[2] * b0 - t_b[0] * b2
+    nb2 = t_b[0] * b1 - t_b[1] * b0
+    ut = u[0] * t_a[0] + u[1] * t_a[1] + u[2] * t_a[2]
+    un = u[0] * na0 + u[1] * na1 + u[2] * na2
+    ub = u[0] * b0 + u[1] * b1 + u[2] * b2
+    out[0] = ut * t_b[0] + un * nb0 + ub * b0
+    out[1] = ut * t_b[1] + un * nb1 + ub * b1
+    out[2] = ut * t_b[2] + un * nb2 + ub * b2
+
+
+@njit(cache=True)
+def compute_tangents(
+    q: np.ndarray, n_nodes: int, tangents: np.ndarray, edge_lengths: np.ndarray
+) -> None:
+    """Unit tangents and lengths of every edge."""
+    for j in range(n_nodes - 1):
+        e0 = q[4 * j + 4] - q[4 * j]
+        e1 = q[4 * j + 5] - q[4 * j + 1]
+        e2 = q[4 * j + 6] - q[4 * j + 2]
+        ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        edge_lengths[j] = ln
+        tangents[j, 0] = e0 / ln
+        tangents[j, 1] = e1 / ln
+        tangents[j, 2] = e2 / ln
+
+
+@njit(cache=True)
+def time_parallel_frames(
+    tangents_old: np.ndarray,
+    d1_old: np.ndarray,
+    tangents: np.ndarray,
+    n_edges: int,
+    d1: np.ndarray,
+    d2: np.ndarray,
+) -> None:
+    """Reference directors by time-parallel transport from the frame frozen at step start.
+
+    Always transports from the *start-of-step* frame (physics.md §3), never from the
+    previous Newton iterate, then re-orthonormalises.
+    """
+    for j in range(n_edges):
+        parallel_transport(d1_old[j], tangents_old[j], tangents[j], d1[j])
+        t = tangents[j]
+        c = dot3(d1[j], t)
+        d1[j, 0] -= c * t[0]
+        d1[j, 1] -= c * t[1]
+        d1[j, 2] -= c * t[2]
+        n = math.sqrt(dot3(d1[j], d1[j]))
+        d1[j, 0] /= n
+        d1[j, 1] /= n
+        d1[j, 2] /= n
+        cross3(t, d1[j], d2[j])
+
+
+@njit(cache=True)
+def reference_twist(
+    tangents: np.ndarray,
+    d1: np.ndarray,
+    ref_twist_old: np.ndarray,
+    n_nodes: int,
+    ref_twist: np.ndarray,
+) -> None:
+    """Reference twist at interior nodes, updated incrementally (physics.md §3).
+
+    Transport d1_{i-1} onto t_i, rotate it about t_i by the old reference twist, and
+    add the signed angle from there to d1_i. Incremental, so no 2 pi jumps.
+    """
+    u = np.empty(3)
+    w = np.empty(3)
+    for i in range(1, n_nodes - 1):
+        t = tangents[i]
+        parallel_transport(d1[i - 1], tangents[i - 1], t, u)
+        a = ref_twist_old[i]
+        ca = math.cos(a)
+        sa = math.sin(a)
+        cross3(t, u, w)
+        tu = dot3(t, u)
+        for k in range(3):
+            u[k] = ca * u[k] + sa * w[k] + (1.0 - ca) * tu * t[k]
+        cross3(u, d1[i], w)
+        ref_twist[i] = a + math.atan2(dot3(w, t), dot3(u, d1[i]))
+
+
+@njit(cache=True)
+def material_frames(
+    q: np.ndarray, d1: np.ndarray, d2: np.ndarray, n_edges: int, m1: np.ndarray, m2: np.ndarray
+) -> None:
+    """m1 = cos(theta) d1 + sin(theta) d2, m2 = -sin(theta) d1 + cos(theta) d2."""
+    for j in range(n_edges):
+        c = math.cos(q[4 * j + 3])
+        s = math.sin(q[4 * j + 3])
+        for k in range(3):
+            m1[j, k] = c * d1[j, k] + s * d2[j, k]
+            m2[j, k] = -s * d1[j, k] + c * d2[j, k]
+
+
+@njit(cache=True)
+def curvature_binormal(tangents: np.ndarray, n_nodes: int, kb: np.ndarray) -> None:
+    """kb_i = 2 t_{i-1} x t_i / (1 + t_{i-1} . t_i) (Bergou 2010 eq. 1)."""
+    w = np.empty(3)
+    for i in range(1, n_nodes - 1):
+        cross3(tangents[i - 1], tangents[i], w)
+        f = 2.0 / (1.0 + dot3(tangents[i - 1], tangents[i]))
+        kb[i, 0] = f * w[0]
+        kb[i, 1] = f * w[1]
+        kb[i, 2] = f * w[2]
+
+
+@njit(cache=True)
+def strains(
+    q: np.ndarray,
+    kb: np.ndarray,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    ref_twist: np.ndarray,
+    n_nodes: int,
+    kappa: np.ndarray,
+    twist: np.ndarray,
+) -> None:
+    """kappa1 = kb.(m2_e + m2_f)/2, kappa2 = -kb.(m1_e + m1_f)/2, twist = dtheta + ref twist."""
+    for i in range(1, n_nodes - 1):
+        k1 = 0.0
+        k2 = 0.0
+        for k in range(3):
+            k1 += kb[i, k] * (m2[i - 1, k] + m2[i, k])
+            k2 -= kb[i, k] * (m1[i - 1, k] + m1[i, k])
+        kappa[i, 0] = 0.5 * k1
+        kappa[i, 1] = 0.5 * k2
+        twist[i] = q[4 * i + 3] - q[4 * i - 1] + ref_twist[i]
+
+
+@njit(cache=True)
+def initial_reference_frame(tangents: np.ndarray, n_edges: int, d1: np.ndarray) -> None:
+    """A space-parallel reference frame for a new rod: d1_0 any unit normal, then
+    parallel-transported edge to edge (zero reference twist by construction)."""
+    t0 = tangents[0]
+    # the coordinate axis least aligned with t0, projected
+    ax = 0
+    if abs(t0[1]) < abs(t0[ax]):
+        ax = 1
+    if abs(t0[2]) < abs(t0[ax]):
+        ax = 2
+    for k in range(3):
+        d1[0, k] = -t0[ax] * t0[k]
+    d1[0, ax] += 1.0
+    n = math.sqrt(dot3(d1[0], d1[0]))
+    for k in range(3):
+        d1[0, k] /= n
+    for j in range(1, n_edges):
+        parallel_transport(d1[j - 1], tangents[j - 1], tangents[j], d1[j])
+        c = dot3(d1[j], tangents[j])
+        for k in range(3):
+            d1[j, k] -= c * tangents[j, k]
+        n = math.sqrt(dot3(d1[j], d1[j]))
+        for k in range(3):
+            d1[j, k] /= n

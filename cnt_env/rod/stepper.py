@@ -1,0 +1,551 @@
+"""Implicit-Euler Newton stepper for the discrete elastic rod (physics.md §3).
+
+Residual (per DOF), with u = (q - q_n)/dt:
+
+    f(q) = M ((q - q_n)/dt - u_n)/dt - F_elastic(q) - F_ext(q, u)
+    J    = M/dt^2 + Hess E - dF_ext/dq          (dF/dq = (dF/du)/dt for drag)
+
+J is assembled straight into LAPACK band storage and solved with the pivoted banded LU
+of ``banded.py``. Fixed DOFs get identity rows and a zero update. A step converges when
+the free-DOF residual is below ``residual_tol * force_scale`` (force units; e_v in the
+dimensionless model) or the update is below ``update_tol * length_scale``. A failed step
+is rewound and retried as two half steps, recursively, down to ``max_halvings``; past
+that :class:`SimulationError` is raised with the state. Nothing returns NaN silently.
+
+:class:`Rod` owns every buffer (capacity ``max_nodes``; ``n_nodes`` of them in use):
+
+======================  ==================  ==========================================
+buffer                  shape               lives on
+======================  ==================  ==========================================
+``q``, ``u``            (4 max_nodes,)      DOFs: positions and theta; their velocities
+``mass``                (4 max_nodes,)      DOFs: lumped node mass, theta inertia
+``fixed``               (4 max_nodes,)      DOFs: 1 = prescribed (not solved for)
+``ext_force``           (4 max_nodes,)      DOFs: constant external load
+``rest_lengths``        (max_nodes - 1,)    edges
+``drag_on``             (max_nodes - 1,)    edges: 1 = drag acts
+``tangents_old``, ...   (max_nodes - 1, 3)  edges: frame frozen at step start
+``ref_twist_old``       (max_nodes,)        interior nodes
+``voronoi_lengths``     (max_nodes,)        interior nodes (ends hold half an edge)
+======================  ==================  ==========================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..forces import add_linear_drag
+from . import elastic, frames
+from .banded import (
+    KL,
+    KU,
+    LDAB,
+    band_alloc,
+    band_fix_dof,
+    band_lu_factor,
+    band_lu_solve,
+    band_zero,
+)
+
+_DIAG = KL + KU
+
+# status codes of newton_solve
+CONVERGED = 0
+MAX_ITERATIONS = 1
+SINGULAR = 2
+NON_FINITE = 3
+STATUS_TEXT = {
+    CONVERGED: "converged",
+    MAX_ITERATIONS: "Newton did not converge within max_iter",
+    SINGULAR: "singular Jacobian (zero pivot in banded LU)",
+    NON_FINITE: "non-finite residual or update",
+}
+
+
+class SimulationError(RuntimeError):
+    """A step failed even after halving dt ``max_halvings`` times.
+
+    Carries ``step`` (steps taken), ``time`` (simulated time reached), ``dt`` (the last
+    attempted step), ``reason`` and ``state`` (a copy of q and u at the last good step).
+    """
+
+    def __init__(self, reason: str, step: int, time: float, dt: float, state: dict):
+        super().__init__(
+            f"simulation failed at step {step}, t = {time:.6g}, dt = {dt:.3g}: {reason}. "
+            "The state at the last converged step is in .state; try a smaller dt, a finer "
+            "discretisation, or check the parameters for unphysical values."
+        )
+        self.reason = reason
+        self.step = step
+        self.time = time
+        self.dt = dt
+        self.state = state
+
+
+@dataclass(frozen=True)
+class RodMaterial:
+    """Stiffnesses and inertia, in the caller's unit system (dimensionless in cnt_env)."""
+
+    k_s: float  # stretching stiffness [force]
+    k_b: float  # bending stiffness [force length^2]
+    k_t: float  # twisting stiffness [force length^2]
+    rho: float  # mass per length
+    r0: float  # tube radius: theta inertia rho * length * r0^2 / 2 (keeps J regular)
+
+    def __post_init__(self) -> None:
+        for name in ("k_s", "k_b", "k_t", "rho", "r0"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"RodMaterial.{name} must be finite and > 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class DragParams:
+    """Linear rarefied drag (paper eq. 2): axial sigma*mu, normal c_sigma*mu."""
+
+    mu: float = 1.0
+    sigma: float = 1.0
+    c_sigma: float = 2.29
+
+    def __post_init__(self) -> None:
+        for name in ("mu", "sigma", "c_sigma"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"DragParams.{name} must be finite and >= 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class NewtonOptions:
+    """Tolerances of the Newton solve; each has one home, here."""
+
+    residual_tol: float = 1e-8  # in units of force_scale (e_v in the dimensionless model)
+    force_scale: float = 1.0
+    update_tol: float = 1e-12  # in units of the shortest rest length
+    max_iter: int = 25
+    max_halvings: int = 12
+
+
+@njit(cache=True)
+def update_frames(
+    q: np.ndarray,
+    n_nodes: int,
+    tangents_old: np.ndarray,
+    d1_old: np.ndarray,
+    ref_twist_old: np.ndarray,
+    tangents: np.ndarray,
+    lengths: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    ref_twist: np.ndarray,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    kb: np.ndarray,
+    kappa: np.ndarray,
+    twist: np.ndarray,
+) -> None:
+    """Frames and strains of iterate q, transported from the step-start frame."""
+    n_edges = n_nodes - 1
+    frames.compute_tangents(q, n_nodes, tangents, lengths)
+    frames.time_parallel_frames(tangents_old, d1_old, tangents, n_edges, d1, d2)
+    frames.reference_twist(tangents, d1, ref_twist_old, n_nodes, ref_twist)
+    frames.material_frames(q, d1, d2, n_edges, m1, m2)
+    frames.curvature_binormal(tangents, n_nodes, kb)
+    frames.strains(q, kb, m1, m2, ref_twist, n_nodes, kappa, twist)
+
+
+@njit(cache=True)
+def assemble(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    twist: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    force: np.ndarray,
+    ab: np.ndarray,
+    rhs: np.ndarray,
+) -> float:
+    """Residual f (stored as rhs = -f, zero on fixed DOFs) and Jacobian J in band storage
+    (identity rows on fixed DOFs). Returns max |f| over free DOFs (inf/NaN propagate)."""
+    n_dof = 4 * n_nodes - 1
+    inv_dt2 = 1.0 / (dt * dt)
+    for k in range(n_dof):
+        force[k] = ext_force[k]
+    band_zero(ab, n_dof)
+    elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, True)
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True)
+    add_linear_drag(
+        q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
+    )
+    res = 0.0
+    for k in range(n_dof):
+        if fixed[k]:
+            rhs[k] = 0.0
+            band_fix_dof(ab, n_dof, k)
+            continue
+        r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # physics.md §3
+        ab[_DIAG, k] += mass[k] * inv_dt2
+        rhs[k] = -r
+        if not abs(r) <= res:  # also catches NaN
+            res = abs(r)
+    return res
+
+
+@njit(cache=True)
+def newton_solve(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    tangents_old: np.ndarray,
+    d1_old: np.ndarray,
+    ref_twist_old: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    tol_abs: float,
+    update_abs: float,
+    max_iter: int,
+    tangents: np.ndarray,
+    lengths: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    kb: np.ndarray,
+    kappa: np.ndarray,
+    twist: np.ndarray,
+    ref_twist: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    ipiv: np.ndarray,
+    rhs: np.ndarray,
+    out_stats: np.ndarray,
+) -> int:
+    """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
+    at their prescribed values) and receives the solution. On return the frame buffers
+    (tangents, d1, d2, ref_twist, ...) belong to the returned q. out_stats = [iterations,
+    final free residual]. Returns a status code (CONVERGED, ...)."""
+    n_dof = 4 * n_nodes - 1
+    status = MAX_ITERATIONS
+    it = 0
+    res = math.inf
+    while True:
+        update_frames(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
+                      d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
+        if status == CONVERGED or it >= max_iter:
+            break
+        res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
+                       voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
+                       flow, mu, sigma, c_sigma, force, ab, rhs)  # fmt: skip
+        if not math.isfinite(res):
+            status = NON_FINITE
+            break
+        if res <= tol_abs:
+            status = CONVERGED
+            break
+        if band_lu_factor(ab, n_dof, ipiv) != 0:
+            status = SINGULAR
+            break
+        band_lu_solve(ab, n_dof, ipiv, rhs)
+        du = 0.0
+        for k in range(n_dof):
+            q[k] += rhs[k]
+            if not abs(rhs[k]) <= du:
+                du = abs(rhs[k])
+        it += 1
+        if not math.isfinite(du):
+            status = NON_FINITE
+            break
+        if du <= update_abs:
+            status = CONVERGED  # frames are refreshed for this q at the loop top
+    out_stats[0] = it
+    out_stats[1] = res
+    return status
+
+
+class Rod:
+    """A discrete elastic rod with its buffers and an implicit-Euler Newton stepper.
+
+    Positions are set from ``nodes`` (n_nodes, 3); rest lengths are the initial edge
+    lengths unless given. The reference frame starts space-parallel, so the rod starts
+    untwisted with theta = 0 unless ``thetas`` are given.
+    """
+
+    q: np.ndarray
+    u: np.ndarray
+    mass: np.ndarray
+    fixed: np.ndarray
+    ext_force: np.ndarray
+    rest_lengths: np.ndarray
+    voronoi_lengths: np.ndarray
+    drag_on: np.ndarray
+    flow: np.ndarray
+    tangents_old: np.ndarray
+    d1_old: np.ndarray
+    ref_twist_old: np.ndarray
+
+    def __init__(
+        self,
+        nodes: np.ndarray,
+        material: RodMaterial,
+        drag: DragParams | None = None,
+        options: NewtonOptions | None = None,
+        rest_lengths: np.ndarray | None = None,
+        thetas: np.ndarray | None = None,
+        max_nodes: int | None = None,
+    ) -> None:
+        nodes = np.asarray(nodes, dtype=np.float64)
+        if nodes.ndim != 2 or nodes.shape[1] != 3 or nodes.shape[0] < 2:
+            raise ValueError("nodes must have shape (n_nodes >= 2, 3)")
+        if not np.all(np.isfinite(nodes)):
+            raise ValueError("nodes contain NaN or inf")
+        n = nodes.shape[0]
+        cap = max(n, max_nodes or n)
+        self.material = material
+        self.drag = drag or DragParams(mu=0.0)
+        self.options = options or NewtonOptions()
+        self.n_nodes = n
+        self.max_nodes = cap
+        n_dof_cap = 4 * cap  # one padding slot so q reshapes to (n_nodes, 4)
+        self.q = np.zeros(n_dof_cap)
+        self.u = np.zeros(n_dof_cap)
+        self.mass = np.zeros(n_dof_cap)
+        self.fixed = np.zeros(n_dof_cap, dtype=np.uint8)
+        self.ext_force = np.zeros(n_dof_cap)
+        self.rest_lengths = np.zeros(cap - 1)
+        self.voronoi_lengths = np.zeros(cap)
+        self.drag_on = np.ones(cap - 1, dtype=np.uint8)
+        self.flow = np.zeros(3)
+        self.tangents_old = np.zeros((cap - 1, 3))
+        self.d1_old = np.zeros((cap - 1, 3))
+        self.ref_twist_old = np.zeros(cap)
+        # Newton workspace
+        self._q_old = np.zeros(n_dof_cap)
+        self._u_old = np.zeros(n_dof_cap)
+        self._tangents = np.zeros((cap - 1, 3))
+        self._lengths = np.zeros(cap - 1)
+        self._d1 = np.zeros((cap - 1, 3))
+        self._d2 = np.zeros((cap - 1, 3))
+        self._m1 = np.zeros((cap - 1, 3))
+        self._m2 = np.zeros((cap - 1, 3))
+        self._kb = np.zeros((cap, 3))
+        self._kappa = np.zeros((cap, 2))
+        self._twist = np.zeros(cap)
+        self._ref_twist = np.zeros(cap)
+        self._force = np.zeros(n_dof_cap)
+        self._ab = band_alloc(n_dof_cap)
+        self._ipiv = np.zeros(n_dof_cap, dtype=np.int64)
+        self._rhs = np.zeros(n_dof_cap)
+        self._stats = np.zeros(2)
+        self.time = 0.0
+        self.steps = 0
+        self.newton_iterations = 0
+        self.halvings = 0
+
+        for i in range(n):
+            self.q[4 * i : 4 * i + 3] = nodes[i]
+        if thetas is not None:
+            self.q[3 : 4 * n - 1 : 4] = thetas
+        frames.compute_tangents(self.q, n, self.tangents_old, self._lengths)
+        if rest_lengths is None:
+            self.rest_lengths[: n - 1] = self._lengths[: n - 1]
+        else:
+            self.rest_lengths[: n - 1] = rest_lengths
+        if np.any(self.rest_lengths[: n - 1] <= 0):
+            raise ValueError("rest lengths must be > 0 (coincident nodes?)")
+        frames.initial_reference_frame(self.tangents_old, n - 1, self.d1_old)
+        self.update_mass()
+
+    # ---- views on the active part -------------------------------------------------
+    @property
+    def n_dof(self) -> int:
+        return 4 * self.n_nodes - 1
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """(n_nodes, 3) view of the node positions."""
+        return self.q[: 4 * self.n_nodes].reshape(self.n_nodes, 4)[:, :3]
+
+    @property
+    def node_velocities(self) -> np.ndarray:
+        return self.u[: 4 * self.n_nodes].reshape(self.n_nodes, 4)[:, :3]
+
+    @property
+    def thetas(self) -> np.ndarray:
+        return self.q[3 : self.n_dof : 4]
+
+    def fix_node(self, i: int, fixed: bool = True) -> None:
+        self.fixed[4 * i : 4 * i + 3] = fixed
+
+    def fix_theta(self, j: int, fixed: bool = True) -> None:
+        self.fixed[4 * j + 3] = fixed
+
+    def update_mass(self) -> None:
+        """Lumped masses from rest lengths: node rho * Voronoi length (physics.md §3)."""
+        n = self.n_nodes
+        rl = self.rest_lengths[: n - 1]
+        vor = self.voronoi_lengths
+        vor[:n] = 0.0
+        vor[: n - 1] += 0.5 * rl
+        vor[1:n] += 0.5 * rl
+        rho, r0 = self.material.rho, self.material.r0
+        for k in range(3):
+            self.mass[k : 4 * n : 4] = rho * vor[:n]
+        self.mass[3 : 4 * n - 1 : 4] = rho * rl * r0 * r0 / 2.0
+
+    # ---- energies -------------------------------------------------------------
+    def elastic_energy(self) -> float:
+        """Stretch + bend + twist energy of the current state (frames as last stepped)."""
+        n = self.n_nodes
+        frames.compute_tangents(self.q, n, self._tangents, self._lengths)
+        frames.time_parallel_frames(
+            self.tangents_old, self.d1_old, self._tangents, n - 1, self._d1, self._d2
+        )
+        frames.reference_twist(self._tangents, self._d1, self.ref_twist_old, n, self._ref_twist)
+        frames.material_frames(self.q, self._d1, self._d2, n - 1, self._m1, self._m2)
+        frames.curvature_binormal(self._tangents, n, self._kb)
+        frames.strains(self.q, self._kb, self._m1, self._m2, self._ref_twist, n,
+                       self._kappa, self._twist)  # fmt: skip
+        m = self.material
+        return elastic.stretch_energy(self.q, n, self.rest_lengths, m.k_s) + (
+            elastic.bend_twist_energy(
+                self._kappa, self._twist, self.voronoi_lengths, n, m.k_b, m.k_t
+            )
+        )
+
+    def elastic_force(self) -> np.ndarray:
+        """-dE/dq of the current state (n_dof,), frames as for :meth:`elastic_energy`."""
+        self.elastic_energy()  # refreshes frames and strains in the workspace
+        n = self.n_nodes
+        m = self.material
+        f = np.zeros(self.n_dof)
+        ab = self._ab
+        elastic.add_stretch(self.q, n, self.rest_lengths, m.k_s, f, ab, False)
+        elastic.add_bend_twist(self.q, n, self._m1, self._m2, self._twist,
+                               self.voronoi_lengths, m.k_b, m.k_t, f, ab, False)  # fmt: skip
+        return f
+
+    def kinetic_energy(self) -> float:
+        nd = self.n_dof
+        return 0.5 * float(np.dot(self.mass[:nd], self.u[:nd] ** 2))
+
+    # ---- stepping -------------------------------------------------------------
+    def _try_step(self, dt: float) -> int:
+        """Attempt one step of size dt. On success commit it; on failure restore."""
+        nd = self.n_dof
+        n = self.n_nodes
+        self._q_old[:nd] = self.q[:nd]
+        self._u_old[:nd] = self.u[:nd]
+        # explicit predictor for free DOFs (fixed DOFs keep their prescribed values)
+        free = self.fixed[:nd] == 0
+        self.q[:nd][free] += dt * self.u[:nd][free]
+        m, d, o = self.material, self.drag, self.options
+        status = newton_solve(
+            self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
+            self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
+            self.tangents_old, self.d1_old, self.ref_twist_old,
+            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma,
+            o.residual_tol * o.force_scale,
+            o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
+            o.max_iter,
+            self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
+            self._kb, self._kappa, self._twist, self._ref_twist,
+            self._force, self._ab, self._ipiv, self._rhs, self._stats,
+        )  # fmt: skip
+        self.newton_iterations += int(self._stats[0])
+        if status != CONVERGED:
+            self.q[:nd] = self._q_old[:nd]
+            self.u[:nd] = self._u_old[:nd]
+            return status
+        self.u[:nd] = (self.q[:nd] - self._q_old[:nd]) / dt
+        ne = n - 1
+        self.tangents_old[:ne] = self._tangents[:ne]
+        self.d1_old[:ne] = self._d1[:ne]
+        self.ref_twist_old[:n] = self._ref_twist[:n]
+        self.time += dt
+        self.steps += 1
+        return CONVERGED
+
+    def step(self, dt: float) -> None:
+        """Advance by exactly ``dt``; a failed step is retried as two halves, recursively.
+
+        Raises SimulationError when a step fails at dt / 2**max_halvings.
+        """
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+        self._advance(dt, 0)
+
+    def _advance(self, dt: float, depth: int) -> None:
+        status = self._try_step(dt)
+        if status == CONVERGED:
+            return
+        if depth >= self.options.max_halvings:
+            nd = self.n_dof
+            raise SimulationError(
+                STATUS_TEXT[status], self.steps, self.time, dt,
+                {"q": self.q[:nd].copy(), "u": self.u[:nd].copy(), "n_nodes": self.n_nodes},
+            )  # fmt: skip
+        self.halvings += 1
+        self._advance(0.5 * dt, depth + 1)
+        self._advance(0.5 * dt, depth + 1)
+
+    def snapshot(self) -> dict:
+        """Exact copy of the dynamic state (restore with :meth:`restore`)."""
+        return {
+            "n_nodes": self.n_nodes, "q": self.q.copy(), "u": self.u.copy(),
+            "fixed": self.fixed.copy(), "ext_force": self.ext_force.copy(),
+            "rest_lengths": self.rest_lengths.copy(), "drag_on": self.drag_on.copy(),
+            "flow": self.flow.copy(), "tangents_old": self.tangents_old.copy(),
+            "d1_old": self.d1_old.copy(), "ref_twist_old": self.ref_twist_old.copy(),
+            "time": self.time, "steps": self.steps,
+            "newton_iterations": self.newton_iterations, "halvings": self.halvings,
+        }  # fmt: skip
+
+    def restore(self, snap: dict) -> None:
+        for key, value in snap.items():
+            if isinstance(value, np.ndarray):
+                getattr(self, key)[...] = value
+            else:
+                setattr(self, key, value)
+        self.update_mass()
+
+
+__all__ = [
+    "LDAB",
+    "DragParams",
+    "NewtonOptions",
+    "Rod",
+    "RodMaterial",
+    "SimulationError",
+    "newton_solve",
+]

@@ -1,0 +1,1 @@
+"""Training, evaluation and sweep scripts for CNTDeposit-v0."""
