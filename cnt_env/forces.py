@@ -1,4 +1,5 @@
-"""External forces with their Jacobians: rarefied drag (paper eq. 2).
+"""External forces with their Jacobians: vdW contact force (paper eq. 1) and rarefied drag
+(paper eq. 2).
 
 Both kernels *add* the force to ``force`` and *add* -dF/dq (the contribution to the
 residual Jacobian) to the band ``ab``.
@@ -96,3 +97,37 @@ def add_linear_drag(
                 ab[_DIAG + k - m - 4, b + m] -= dfb
                 ab[_DIAG + k - m + 4, a + m] -= dfa
                 ab[_DIAG + k - m, b + m] -= dfb
+
+
+@njit(cache=True)
+def add_vdw(
+    q: np.ndarray,
+    node: int,
+    coef: float,
+    delta: float,
+    sqrt_clamp: float,
+    force: np.ndarray,
+    ab: np.ndarray,
+    with_jacobian: bool,
+) -> None:
+    """vdW pull on the contact node c (paper eq. 1, physics.md §4).
+
+    E_v = coef (beta - beta0) with coef = e_v delta / beta0 and sin(beta) = y_c / delta, so
+    F_y = -coef / sqrt(delta^2 - y_c^2). The root is clamped from below at
+    ``sqrt_clamp * delta`` (beyond the clamp the force is constant and its derivative 0).
+    Integrated from beta0 to 0 it releases exactly e_v delta.
+    """
+    if node < 0:
+        return
+    k = 4 * node + 1  # y DOF of node c
+    y = q[k]
+    root_sq = delta * delta - y * y
+    floor = sqrt_clamp * delta
+    if root_sq <= floor * floor:
+        force[k] -= coef / floor
+        return
+    root = math.sqrt(root_sq)
+    force[k] -= coef / root
+    if with_jacobian:
+        # residual Jacobian gets -dF_y/dy = coef * y / root^3
+        ab[_DIAG, k] += coef * y / (root * root_sq)

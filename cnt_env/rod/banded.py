@@ -59,9 +59,10 @@ def band_zero(ab, n):
 def band_add(ab, i, j, value):
     """``A[i, j] += value``.
 
-    Requires ``|i - j| <= 10`` and ``0 <= i, j < n``; this is NOT checked (an
-    out-of-band index silently writes into the LU workspace rows or raises an
-    IndexError / corrupts another column, depending on the sign).
+    Requires ``|i - j| <= 10`` and ``0 <= i, j < n``; this is NOT checked:
+    numba does no bounds checking, so an out-of-band pair silently writes into
+    the LU workspace rows, another column, or outside the array.  Inlined
+    into the caller (``inline="always"``).
     """
     ab[KV + i - j, j] += value
 

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..forces import add_linear_drag
+from ..forces import add_linear_drag, add_vdw
 from . import elastic, frames
 from .banded import (
     KL,
@@ -179,6 +179,7 @@ def assemble(
     mu: float,
     sigma: float,
     c_sigma: float,
+    vdw: np.ndarray,
     force: np.ndarray,
     ab: np.ndarray,
     rhs: np.ndarray,
@@ -195,6 +196,7 @@ def assemble(
     add_linear_drag(
         q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
     )
+    add_vdw(q, int(vdw[0]), vdw[1], vdw[2], vdw[3], force, ab, True)
     res = 0.0
     for k in range(n_dof):
         if fixed[k]:
@@ -232,6 +234,7 @@ def newton_solve(
     mu: float,
     sigma: float,
     c_sigma: float,
+    vdw: np.ndarray,
     tol_abs: float,
     update_abs: float,
     max_iter: int,
@@ -266,7 +269,7 @@ def newton_solve(
             break
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                       flow, mu, sigma, c_sigma, force, ab, rhs)  # fmt: skip
+                       flow, mu, sigma, c_sigma, vdw, force, ab, rhs)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
@@ -336,37 +339,10 @@ class Rod:
         self.options = options or NewtonOptions()
         self.n_nodes = n
         self.max_nodes = cap
-        n_dof_cap = 4 * cap  # one padding slot so q reshapes to (n_nodes, 4)
-        self.q = np.zeros(n_dof_cap)
-        self.u = np.zeros(n_dof_cap)
-        self.mass = np.zeros(n_dof_cap)
-        self.fixed = np.zeros(n_dof_cap, dtype=np.uint8)
-        self.ext_force = np.zeros(n_dof_cap)
-        self.rest_lengths = np.zeros(cap - 1)
-        self.voronoi_lengths = np.zeros(cap)
-        self.drag_on = np.ones(cap - 1, dtype=np.uint8)
+        self._allocate(cap)
         self.flow = np.zeros(3)
-        self.tangents_old = np.zeros((cap - 1, 3))
-        self.d1_old = np.zeros((cap - 1, 3))
-        self.ref_twist_old = np.zeros(cap)
-        # Newton workspace
-        self._q_old = np.zeros(n_dof_cap)
-        self._u_old = np.zeros(n_dof_cap)
-        self._tangents = np.zeros((cap - 1, 3))
-        self._lengths = np.zeros(cap - 1)
-        self._d1 = np.zeros((cap - 1, 3))
-        self._d2 = np.zeros((cap - 1, 3))
-        self._m1 = np.zeros((cap - 1, 3))
-        self._m2 = np.zeros((cap - 1, 3))
-        self._kb = np.zeros((cap, 3))
-        self._kappa = np.zeros((cap, 2))
-        self._twist = np.zeros(cap)
-        self._ref_twist = np.zeros(cap)
-        self._force = np.zeros(n_dof_cap)
-        self._ab = band_alloc(n_dof_cap)
-        self._ipiv = np.zeros(n_dof_cap, dtype=np.int64)
-        self._rhs = np.zeros(n_dof_cap)
-        self._stats = np.zeros(2)
+        # vdW contact (forces.add_vdw): [node (-1: none), e_v delta / beta0, delta, clamp]
+        self.vdw = np.array([-1.0, 0.0, 1.0, 0.05])
         self.time = 0.0
         self.steps = 0
         self.newton_iterations = 0
@@ -384,6 +360,94 @@ class Rod:
         if np.any(self.rest_lengths[: n - 1] <= 0):
             raise ValueError("rest lengths must be > 0 (coincident nodes?)")
         frames.initial_reference_frame(self.tangents_old, n - 1, self.d1_old)
+        self.update_mass()
+
+    # per-DOF, per-edge and per-node buffers, and the Newton workspace (name: (shape, dtype))
+    _DOF_BUFFERS = ("q", "u", "mass", "fixed", "ext_force", "_q_old", "_u_old", "_force",
+                    "_rhs", "_ipiv")  # fmt: skip
+    _EDGE_BUFFERS = ("rest_lengths", "drag_on", "tangents_old", "d1_old", "_tangents",
+                     "_lengths", "_d1", "_d2", "_m1", "_m2")  # fmt: skip
+    _NODE_BUFFERS = ("voronoi_lengths", "ref_twist_old", "_kb", "_kappa", "_twist",
+                     "_ref_twist")  # fmt: skip
+
+    def _allocate(self, cap: int) -> None:
+        """(Re)allocate every buffer for ``cap`` nodes, keeping the active contents."""
+        old = {name: getattr(self, name, None) for name in
+               self._DOF_BUFFERS + self._EDGE_BUFFERS + self._NODE_BUFFERS}  # fmt: skip
+        n_dof_cap = 4 * cap  # one padding slot so q reshapes to (n_nodes, 4)
+        new = {
+            "q": np.zeros(n_dof_cap), "u": np.zeros(n_dof_cap), "mass": np.zeros(n_dof_cap),
+            "fixed": np.zeros(n_dof_cap, dtype=np.uint8), "ext_force": np.zeros(n_dof_cap),
+            "_q_old": np.zeros(n_dof_cap), "_u_old": np.zeros(n_dof_cap),
+            "_force": np.zeros(n_dof_cap), "_rhs": np.zeros(n_dof_cap),
+            "_ipiv": np.zeros(n_dof_cap, dtype=np.int64),
+            "rest_lengths": np.zeros(cap - 1), "drag_on": np.ones(cap - 1, dtype=np.uint8),
+            "tangents_old": np.zeros((cap - 1, 3)), "d1_old": np.zeros((cap - 1, 3)),
+            "_tangents": np.zeros((cap - 1, 3)), "_lengths": np.zeros(cap - 1),
+            "_d1": np.zeros((cap - 1, 3)), "_d2": np.zeros((cap - 1, 3)),
+            "_m1": np.zeros((cap - 1, 3)), "_m2": np.zeros((cap - 1, 3)),
+            "voronoi_lengths": np.zeros(cap), "ref_twist_old": np.zeros(cap),
+            "_kb": np.zeros((cap, 3)), "_kappa": np.zeros((cap, 2)), "_twist": np.zeros(cap),
+            "_ref_twist": np.zeros(cap),
+        }  # fmt: skip
+        for name, arr in new.items():
+            prev = old[name]
+            if prev is not None:
+                m = min(len(prev), len(arr))
+                arr[:m] = prev[:m]
+            setattr(self, name, arr)
+        self._ab = band_alloc(n_dof_cap)
+        self._stats = np.zeros(2)
+        self.max_nodes = cap
+
+    def append_node(self, position: np.ndarray, velocity: np.ndarray, rest_length: float) -> None:
+        """Add a node after the last one (injection at the free top, physics.md §4).
+
+        The new edge gets theta and the reference director of the last edge transported
+        onto its tangent, so it starts untwisted; the new interior node has zero
+        reference twist.
+        """
+        n = self.n_nodes
+        if n + 1 > self.max_nodes:
+            self._allocate(max(2 * self.max_nodes, n + 1))
+        j = n - 1  # index of the new edge
+        i = 4 * n
+        self.q[i : i + 3] = position
+        self.u[i : i + 3] = velocity
+        self.q[i - 1] = self.q[i - 5]  # theta of the new edge = theta of the last edge
+        self.u[i - 1] = self.u[i - 5]
+        self.fixed[i - 1 : i + 3] = 0
+        self.ext_force[i - 1 : i + 3] = 0.0
+        e = np.asarray(position, dtype=np.float64) - self.q[i - 4 : i - 1]
+        t_new = e / np.linalg.norm(e)
+        frames.parallel_transport(self.d1_old[j - 1], self.tangents_old[j - 1], t_new,
+                                  self.d1_old[j])  # fmt: skip
+        self.d1_old[j] -= self.d1_old[j].dot(t_new) * t_new
+        self.d1_old[j] /= np.linalg.norm(self.d1_old[j])
+        self.tangents_old[j] = t_new
+        self.rest_lengths[j] = rest_length
+        self.drag_on[j] = 1
+        self.ref_twist_old[n - 1] = 0.0
+        self.n_nodes = n + 1
+        self.update_mass()
+
+    def drop_front(self, k: int) -> None:
+        """Remove the first k nodes (deletion of the far deposited tail, physics.md §4)."""
+        if k <= 0:
+            return
+        n = self.n_nodes
+        if n - k < 2:
+            raise ValueError("cannot drop below two nodes")
+        for name in self._DOF_BUFFERS:
+            a = getattr(self, name)
+            a[: 4 * (n - k)] = a[4 * k : 4 * n].copy()
+        for name in self._EDGE_BUFFERS:
+            a = getattr(self, name)
+            a[: n - 1 - k] = a[k : n - 1].copy()
+        for name in self._NODE_BUFFERS:
+            a = getattr(self, name)
+            a[: n - k] = a[k:n].copy()
+        self.n_nodes = n - k
         self.update_mass()
 
     # ---- views on the active part -------------------------------------------------
@@ -474,7 +538,7 @@ class Rod:
             self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
             self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
             self.tangents_old, self.d1_old, self.ref_twist_old,
-            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma,
+            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, self.vdw,
             o.residual_tol * o.force_scale,
             o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
             o.max_iter,
@@ -527,17 +591,21 @@ class Rod:
             "rest_lengths": self.rest_lengths.copy(), "drag_on": self.drag_on.copy(),
             "flow": self.flow.copy(), "tangents_old": self.tangents_old.copy(),
             "d1_old": self.d1_old.copy(), "ref_twist_old": self.ref_twist_old.copy(),
-            "time": self.time, "steps": self.steps,
+            "vdw": self.vdw.copy(), "voronoi_lengths": self.voronoi_lengths.copy(),
+            "mass": self.mass.copy(), "time": self.time, "steps": self.steps,
             "newton_iterations": self.newton_iterations, "halvings": self.halvings,
         }  # fmt: skip
 
     def restore(self, snap: dict) -> None:
+        """Restore a :meth:`snapshot` exactly (buffers are resized to fit)."""
+        cap = (len(snap["q"])) // 4
+        if cap != self.max_nodes:
+            self._allocate(cap)
         for key, value in snap.items():
             if isinstance(value, np.ndarray):
                 getattr(self, key)[...] = value
             else:
                 setattr(self, key, value)
-        self.update_mass()
 
 
 __all__ = [

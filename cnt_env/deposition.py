@@ -1,0 +1,395 @@
+"""The deposition simulator: a CNT fed from the top falls onto a substrate and sticks.
+
+:class:`DepositionSim` owns every buffer (through its :class:`~cnt_env.rod.stepper.Rod`)
+and does, after each converged implicit step (physics.md §4):
+
+1. contact: a free contact node that reaches y <= 0 is deposited (its DOFs fixed by the
+   substrate); a new contact edge flatter than ``beta0_min`` is deposited at once;
+2. vdW: the contact node c feels F_y = -(e_v delta / beta0) / sqrt(delta^2 - y_c^2)
+   (paper eq. 1), inside the Newton solve with its Jacobian;
+3. injection: while the top node is below H - delta, a node is appended one delta beyond
+   it along the top tangent;
+4. deletion: deposited nodes the solve no longer needs leave it; every deposited node is
+   first appended to the persistent trace.
+
+Rod layout: ``[deposited nodes (n_deposited, fixed) | contact node c | free ... | top]``.
+All quantities are dimensionless (units.py): lengths in L_vb, time in mu L_vb^2 / e_v.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
+from .substrate import FlatSticky, Substrate
+from .units import DimensionlessParams
+
+CONTACT_MODES = ("project", "event")
+
+
+@dataclass(frozen=True)
+class ContactOptions:
+    """Contact and vdW guards (physics.md §4). Each option has one home, here.
+
+    * ``mode``: ``"event"`` (default) locates touchdown: a step that takes the contact
+      node below ``-event_tol * delta * sin(beta0)`` is rewound and retaken with the step length
+      interpolated to land on y = 0. ``"project"`` projects the node onto y = 0 after the
+      step, as in the paper's description.
+    * ``beta0_min``: a new contact edge flatter than this (rad) deposits at once.
+    * ``sqrt_clamp``: sqrt(delta^2 - y_c^2) is clamped below at this times delta.
+    """
+
+    mode: str = "event"
+    beta0_min: float = 0.005
+    sqrt_clamp: float = 0.05
+    event_tol: float = 0.01
+    max_event_iterations: int = 8
+
+    def __post_init__(self) -> None:
+        if self.mode not in CONTACT_MODES:
+            raise ValueError(f"contact mode must be one of {CONTACT_MODES}, got {self.mode!r}")
+        for name in ("beta0_min", "sqrt_clamp", "event_tol"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 < v < 1):
+                raise ValueError(f"ContactOptions.{name} must be in (0, 1), got {v!r}")
+
+
+@dataclass(frozen=True)
+class DepositionConfig:
+    """Everything that defines a deposition run, in dimensionless units.
+
+    ``dt`` defaults to ``dt_factor * delta * Hbar`` (the time to deposit
+    ``dt_factor * delta`` at the speed scale 1/Hbar). ``initial_radius`` is R_i of the
+    start-up contact arc; ``perturbation`` the seeded out-of-plane noise in units of delta.
+    """
+
+    params: DimensionlessParams
+    dt: float | None = None
+    dt_factor: float = 0.05
+    initial_radius: float = 6.4
+    perturbation: float = 1e-3
+    contact: ContactOptions = field(default_factory=ContactOptions)
+    newton: NewtonOptions = field(default_factory=NewtonOptions)
+
+    def __post_init__(self) -> None:
+        if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be finite and > 0, got {self.dt!r}")
+        if not (math.isfinite(self.dt_factor) and self.dt_factor > 0):
+            raise ValueError(f"dt_factor must be finite and > 0, got {self.dt_factor!r}")
+        p = self.params
+        if not (math.isfinite(self.initial_radius) and self.initial_radius > 2 * p.delta_bar):
+            raise ValueError(
+                f"initial_radius must exceed 2 delta_bar = {2 * p.delta_bar}, got "
+                f"{self.initial_radius!r}; refine delta_bar or enlarge the arc"
+            )
+        if self.initial_radius >= p.Hbar:
+            raise ValueError("initial_radius must be below Hbar")
+        if not (math.isfinite(self.perturbation) and self.perturbation >= 0):
+            raise ValueError(f"perturbation must be finite and >= 0, got {self.perturbation!r}")
+
+    @property
+    def time_step(self) -> float:
+        return (
+            self.dt
+            if self.dt is not None
+            else self.dt_factor * self.params.delta_bar * (self.params.Hbar)
+        )
+
+    def with_params(self, **changes: float) -> DepositionConfig:
+        return replace(self, params=replace(self.params, **changes))
+
+
+class DepositionSim:
+    """Stateful deposition simulator (see module docstring)."""
+
+    rod: Rod
+    n_deposited: int  # deposited nodes still in the rod (at its front)
+    beta0: float  # angle of the contact edge when its lower node touched down
+    time: float
+    vdw_work: float  # work done by the vdW force on contact nodes (e_v L_vb)
+
+    def __init__(self, config: DepositionConfig, seed: int | None = 0) -> None:
+        self.config = config
+        self.params = p = config.params
+        self.substrate: Substrate = FlatSticky()
+        self.delta = p.delta_bar
+        self.dt = config.time_step
+        material = RodMaterial(
+            k_s=p.stretch_stiffness, k_b=p.bend_stiffness, k_t=p.twist_stiffness,
+            rho=p.mass_per_length, r0=p.r0_bar,
+        )  # fmt: skip
+        drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma)
+        rng = np.random.default_rng(seed)
+        nodes = initial_shape(p.Hbar, config.initial_radius, self.delta)
+        n_dep = 2  # nodes 0 and 1 lie on the substrate: the clamp of the deposited trace
+        nodes[n_dep:, 2] += (
+            config.perturbation * self.delta * rng.standard_normal(len(nodes) - n_dep)
+        )
+        self.rod = Rod(nodes, material, drag=drag, options=config.newton,
+                       rest_lengths=np.full(len(nodes) - 1, self.delta),
+                       max_nodes=len(nodes) + 64)  # fmt: skip
+        self.rod.flow[:] = p.flow_velocity
+        self.rod.vdw[2] = self.delta
+        self.rod.vdw[3] = config.contact.sqrt_clamp
+        self.n_deposited = 0
+        self._trace = np.zeros((1024, 3))
+        self._n_archived = 0
+        self.time = 0.0
+        self.vdw_work = 0.0
+        self.events = 0
+        self.immediate_deposits = 0
+        for i in range(n_dep):
+            self._deposit(i)
+        self.beta0 = 0.0  # not armed yet
+        self._settle_contact()
+
+    # ---- geometry of the contact ---------------------------------------------------
+    @property
+    def contact_node(self) -> int:
+        return self.n_deposited
+
+    def _contact_angle(self) -> float:
+        """Signed angle beta of edge c-1 -> c to the substrate: atan2(y_c, h) with h the
+        edge's projection on the last deposited edge's direction (so beta > pi/2 when the
+        edge folds back over the trace; sin(beta) = y/delta cannot tell)."""
+        q = self.rod.q
+        c = self.contact_node
+        a, b = 4 * (c - 1), 4 * c
+        e = q[b : b + 3] - q[a : a + 3]
+        prev = q[a : a + 3] - q[a - 4 : a - 1]
+        prev[1] = 0.0
+        h = float(np.dot(e, prev) / np.linalg.norm(prev))
+        return math.atan2(e[1], h)
+
+    # ---- deposition, injection, deletion ------------------------------------------
+    def _deposit(self, node: int) -> None:
+        assert node == self.n_deposited
+        self.substrate.deposit(self.rod, node)
+        if node >= 1:
+            self.rod.fix_theta(node - 1)  # both nodes of edge node-1 are down
+        self.n_deposited += 1
+
+    def _settle_contact(self) -> None:
+        """Deposit contact nodes that are down (or whose edge is already flat), then arm
+        the vdW force on the new contact node with its beta0 (physics.md §4)."""
+        cfg = self.config.contact
+        rod = self.rod
+        armed = self.contact_node
+        while self.contact_node < rod.n_nodes - 2:
+            c = self.contact_node
+            if rod.q[4 * c + 1] <= 0.0:
+                self._deposit(c)
+                continue
+            if c == armed and self.beta0 > 0.0:
+                break  # still descending: beta0 stays what it was at the touchdown of c-1
+            beta = self._contact_angle()
+            if beta < cfg.beta0_min:
+                self.immediate_deposits += 1
+                self._deposit(c)
+                continue
+            self.beta0 = beta
+            break
+        rod.vdw[0] = self.contact_node
+        rod.vdw[1] = self.params.vdw_energy * self.delta / self.beta0
+
+    def _inject(self) -> None:
+        """Append nodes at the free top while it is below H - delta (physics.md §4)."""
+        rod = self.rod
+        while True:
+            n = rod.n_nodes
+            top = rod.q[4 * (n - 1) : 4 * (n - 1) + 3]
+            if top[1] >= self.params.Hbar - self.delta:
+                return
+            prev = rod.q[4 * (n - 2) : 4 * (n - 2) + 3]
+            t = (top - prev) / np.linalg.norm(top - prev)
+            rod.append_node(top + self.delta * t, rod.u[4 * (n - 1) : 4 * (n - 1) + 3].copy(),
+                            self.delta)  # fmt: skip
+
+    def _delete(self) -> None:
+        """Archive and drop deposited nodes the solve no longer needs."""
+        extra = self.n_deposited - self.substrate.keep_deposited
+        if extra <= 0:
+            return
+        self._archive(self.rod.nodes[:extra])
+        self.rod.drop_front(extra)
+        self.n_deposited -= extra
+        self.rod.vdw[0] = self.contact_node
+
+    def _archive(self, points: np.ndarray) -> None:
+        n = self._n_archived
+        k = len(points)
+        if n + k > len(self._trace):
+            grown = np.zeros((max(2 * len(self._trace), n + k), 3))
+            grown[:n] = self._trace[:n]
+            self._trace = grown
+        self._trace[n : n + k] = points
+        self._n_archived = n + k
+
+    # ---- stepping -----------------------------------------------------------------
+    def _light_state(self) -> tuple:
+        r = self.rod
+        nd = r.n_dof
+        ne = r.n_nodes - 1
+        return (
+            r.q[:nd].copy(), r.u[:nd].copy(), r.tangents_old[:ne].copy(), r.d1_old[:ne].copy(),
+            r.ref_twist_old[: r.n_nodes].copy(), r.time, r.steps,
+        )  # fmt: skip
+
+    def _restore_light(self, s: tuple) -> None:
+        r = self.rod
+        nd = r.n_dof
+        ne = r.n_nodes - 1
+        r.q[:nd], r.u[:nd], r.tangents_old[:ne], r.d1_old[:ne] = s[0], s[1], s[2], s[3]
+        r.ref_twist_old[: r.n_nodes] = s[4]
+        r.time, r.steps = s[5], s[6]
+
+    def step(self, dt: float | None = None) -> float:
+        """One implicit step (touchdown-located in event mode), then contact, injection and
+        deletion. Returns the time advanced. Raises SimulationError on solver failure."""
+        dt = self.dt if dt is None else dt
+        rod = self.rod
+        cfg = self.config.contact
+        k_y = 4 * self.contact_node + 1
+        y_before = rod.q[k_y]
+        f_before = self._vdw_force(y_before)
+        state = self._light_state() if cfg.mode == "event" else None
+        rod.step(dt)
+        taken = dt
+        # tolerance relative to the contact node's start height delta sin(beta0): an
+        # overshoot of y below 0 adds (e_v delta / beta0) |beta| of spurious vdW work
+        tol = cfg.event_tol * self.delta * math.sin(self.beta0)
+        if cfg.mode == "event" and rod.q[k_y] < -tol:
+            # touchdown inside the step: regula falsi on the step length, each trial taken
+            # from the step start, until the contact node lands within tol of y = 0
+            self.events += 1
+            lo, y_lo, hi, y_hi = 0.0, y_before, dt, rod.q[k_y]
+            for _ in range(cfg.max_event_iterations):
+                trial = lo + (hi - lo) * y_lo / (y_lo - y_hi)
+                trial = min(max(trial, lo + 0.02 * (hi - lo)), hi - 0.02 * (hi - lo))
+                self._restore_light(state)
+                rod.step(trial)
+                taken = trial
+                y = rod.q[k_y]
+                if abs(y) <= tol:
+                    break
+                if y > 0:
+                    lo, y_lo = trial, y
+                else:
+                    hi, y_hi = trial, y
+        y_after = rod.q[k_y]
+        # vdW work over the step (trapezoid in y): the energy the adhesion released
+        self.vdw_work += 0.5 * (f_before + self._vdw_force(y_after)) * (y_after - y_before)
+        self.time = rod.time
+        self.substrate.after_step(rod, self.n_deposited)
+        self._settle_contact()
+        self._inject()
+        self._delete()
+        return taken
+
+    def _vdw_force(self, y: float) -> float:
+        """F_y on the contact node at height y (the same clamp as forces.add_vdw)."""
+        root_sq = self.delta**2 - y * y
+        floor = self.config.contact.sqrt_clamp * self.delta
+        root = math.sqrt(root_sq) if root_sq > floor * floor else floor
+        return -self.rod.vdw[1] / root
+
+    def advance(self, duration: float) -> None:
+        """Advance by ``duration`` with the configured dt (the last step is shortened)."""
+        end = self.time + duration
+        while self.time < end - 1e-12 * max(1.0, abs(end)):
+            self.step(min(self.dt, end - self.time))
+
+    def run(self, deposit_length: float, progress=None, max_time: float | None = None) -> None:
+        """Step until ``deposit_length`` (L_vb) of trace is laid; ``progress(done, total)``
+        is called after each step."""
+        while self.deposited_length < deposit_length:
+            if max_time is not None and self.time >= max_time:
+                raise SimulationError(
+                    f"deposited only {self.deposited_length:.1f} L_vb by t = {self.time:.4g}",
+                    self.rod.steps, self.time, self.dt, self.rod.snapshot(),
+                )  # fmt: skip
+            self.step()
+            if progress is not None:
+                progress(min(self.deposited_length, deposit_length), deposit_length)
+
+    def set_flow(self, vbar: float, phi: float) -> None:
+        """Change the flow between steps: speed vbar (units of e_v/(mu H)), direction phi."""
+        if not (math.isfinite(vbar) and vbar >= 0 and math.isfinite(phi)):
+            raise ValueError(f"flow must be finite with vbar >= 0, got vbar={vbar}, phi={phi}")
+        s = vbar / self.params.Hbar
+        self.rod.flow[:] = (s * math.cos(phi), 0.0, s * math.sin(phi))
+
+    # ---- outputs --------------------------------------------------------------------
+    def trace(self) -> np.ndarray:
+        """Every deposited node so far, in order of deposition, (n, 3)."""
+        return np.concatenate([self._trace[: self._n_archived],
+                               self.rod.nodes[: self.n_deposited]])  # fmt: skip
+
+    @property
+    def n_trace(self) -> int:
+        return self._n_archived + self.n_deposited
+
+    @property
+    def deposited_length(self) -> float:
+        """Arc length of trace laid since the start (excludes the two initial nodes)."""
+        return (self.n_trace - 2) * self.delta
+
+    @property
+    def suspended_nodes(self) -> np.ndarray:
+        """The free part of the rod, from the contact node to the top, (m, 3)."""
+        return self.rod.nodes[self.n_deposited :]
+
+    def stats(self) -> dict:
+        r = self.rod
+        return {
+            "time": self.time, "steps": r.steps, "newton_iterations": r.newton_iterations,
+            "halvings": r.halvings, "events": self.events,
+            "immediate_deposits": self.immediate_deposits, "n_nodes": r.n_nodes,
+            "deposited_length": self.deposited_length, "vdw_work": self.vdw_work,
+        }  # fmt: skip
+
+    # ---- exact snapshot and restore ---------------------------------------------------
+    def snapshot(self) -> dict:
+        return {
+            "rod": self.rod.snapshot(), "n_deposited": self.n_deposited, "beta0": self.beta0,
+            "trace": self._trace[: self._n_archived].copy(), "time": self.time,
+            "vdw_work": self.vdw_work, "events": self.events,
+            "immediate_deposits": self.immediate_deposits,
+        }  # fmt: skip
+
+    def restore(self, snap: dict) -> None:
+        self.rod.restore(snap["rod"])
+        self.n_deposited = snap["n_deposited"]
+        self.beta0 = snap["beta0"]
+        self._trace = np.zeros((max(1024, 2 * len(snap["trace"])), 3))
+        self._n_archived = 0
+        self._archive(snap["trace"])
+        self.time = snap["time"]
+        self.vdw_work = snap["vdw_work"]
+        self.events = snap["events"]
+        self.immediate_deposits = snap["immediate_deposits"]
+
+
+def initial_shape(height: float, radius: float, delta: float) -> np.ndarray:
+    """Start-up state (physics.md §4): two nodes on the substrate behind the origin's
+    neighbour, an arc of radius R_i from flat to vertical, then a vertical straight part up
+    to y = height. Consecutive nodes are exactly delta apart (chords)."""
+    pts = [np.array([-delta, 0.0, 0.0]), np.array([0.0, 0.0, 0.0])]
+    dphi = 2.0 * math.asin(delta / (2.0 * radius))
+    phi = dphi
+    while phi < 0.5 * math.pi:
+        pts.append(np.array([radius * math.sin(phi), radius * (1.0 - math.cos(phi)), 0.0]))
+        phi += dphi
+    # continue straight up from the last arc point, by chords of length delta
+    last = pts[-1]
+    top_x = radius
+    # first vertical node: on x = radius, delta from the last arc node
+    dx = top_x - last[0]
+    y = last[1] + math.sqrt(max(delta * delta - dx * dx, 0.0))
+    while y <= height + 1e-9:
+        pts.append(np.array([top_x, y, 0.0]))
+        y += delta
+    return np.array(pts)
