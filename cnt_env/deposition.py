@@ -23,6 +23,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .forces import (
+    VDW_BETA0,
+    VDW_CLAMP,
+    VDW_DELTA,
+    VDW_ENERGY,
+    VDW_NODE,
+    VDW_PROFILE,
+    VDW_PROFILES,
+    vdw_pull,
+)
 from .rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
 from .substrate import FlatSticky, Substrate
 from .units import DimensionlessParams
@@ -40,6 +50,9 @@ class ContactOptions:
       step, as in the paper's description.
     * ``beta0_min``: a new contact edge flatter than this (rad) deposits at once.
     * ``sqrt_clamp``: sqrt(delta^2 - y_c^2) is clamped below at this times delta.
+    * ``vdw_profile``: ``"linear"`` (paper eq. 1) or ``"quadratic"`` (forces.vdw_pull).
+    * A contact node is deposited once y_c <= ``event_tol * delta * sin(beta0)`` (the
+      vdW energy it still holds is then below 2% (linear) or 1e-4 (quadratic) of e_v delta).
     """
 
     mode: str = "event"
@@ -47,8 +60,11 @@ class ContactOptions:
     sqrt_clamp: float = 0.05
     event_tol: float = 0.01
     max_event_iterations: int = 8
+    vdw_profile: str = "linear"
 
     def __post_init__(self) -> None:
+        if self.vdw_profile not in VDW_PROFILES:
+            raise ValueError(f"vdw_profile must be one of {list(VDW_PROFILES)}")
         if self.mode not in CONTACT_MODES:
             raise ValueError(f"contact mode must be one of {CONTACT_MODES}, got {self.mode!r}")
         for name in ("beta0_min", "sqrt_clamp", "event_tol"):
@@ -61,9 +77,12 @@ class ContactOptions:
 class DepositionConfig:
     """Everything that defines a deposition run, in dimensionless units.
 
-    ``dt`` defaults to ``dt_factor * delta * Hbar`` (the time to deposit
-    ``dt_factor * delta`` at the speed scale 1/Hbar). ``initial_radius`` is R_i of the
-    start-up contact arc; ``perturbation`` the seeded out-of-plane noise in units of delta.
+    ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py).
+    ``dt`` defaults to ``dt_factor * Hbar``: the time to deposit ``dt_factor`` L_vb at the
+    speed scale 1/Hbar, whatever delta (the dynamics near the contact are set by L_vb, not
+    by delta; touchdowns are located inside a step by the event search). ``initial_radius``
+    is R_i of the start-up contact arc; ``perturbation`` the seeded out-of-plane noise in
+    units of delta.
     """
 
     params: DimensionlessParams
@@ -71,6 +90,7 @@ class DepositionConfig:
     dt_factor: float = 0.05
     initial_radius: float = 6.4
     perturbation: float = 1e-3
+    drag_law: str = "linear"
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
 
@@ -92,11 +112,7 @@ class DepositionConfig:
 
     @property
     def time_step(self) -> float:
-        return (
-            self.dt
-            if self.dt is not None
-            else self.dt_factor * self.params.delta_bar * (self.params.Hbar)
-        )
+        return self.dt if self.dt is not None else self.dt_factor * self.params.Hbar
 
     def with_params(self, **changes: float) -> DepositionConfig:
         return replace(self, params=replace(self.params, **changes))
@@ -121,7 +137,7 @@ class DepositionSim:
             k_s=p.stretch_stiffness, k_b=p.bend_stiffness, k_t=p.twist_stiffness,
             rho=p.mass_per_length, r0=p.r0_bar,
         )  # fmt: skip
-        drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma)
+        drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma, law=config.drag_law)
         rng = np.random.default_rng(seed)
         nodes = initial_shape(p.Hbar, config.initial_radius, self.delta)
         n_dep = 2  # nodes 0 and 1 lie on the substrate: the clamp of the deposited trace
@@ -132,13 +148,16 @@ class DepositionSim:
                        rest_lengths=np.full(len(nodes) - 1, self.delta),
                        max_nodes=len(nodes) + 64)  # fmt: skip
         self.rod.flow[:] = p.flow_velocity
-        self.rod.vdw[2] = self.delta
-        self.rod.vdw[3] = config.contact.sqrt_clamp
+        self.rod.vdw[VDW_DELTA] = self.delta
+        self.rod.vdw[VDW_CLAMP] = config.contact.sqrt_clamp
+        self.rod.vdw[VDW_ENERGY] = p.vdw_energy
+        self.rod.vdw[VDW_PROFILE] = VDW_PROFILES[config.contact.vdw_profile]
         self.n_deposited = 0
         self._trace = np.zeros((1024, 3))
         self._n_archived = 0
         self.time = 0.0
         self.vdw_work = 0.0
+        self.sticking_loss = 0.0  # kinetic energy discarded by sticking nodes (e_v L_vb)
         self.events = 0
         self.immediate_deposits = 0
         for i in range(n_dep):
@@ -167,6 +186,10 @@ class DepositionSim:
     # ---- deposition, injection, deletion ------------------------------------------
     def _deposit(self, node: int) -> None:
         assert node == self.n_deposited
+        i = 4 * node
+        self.sticking_loss += 0.5 * float(
+            np.dot(self.rod.mass[i : i + 3], self.rod.u[i : i + 3] ** 2)
+        )
         self.substrate.deposit(self.rod, node)
         if node >= 1:
             self.rod.fix_theta(node - 1)  # both nodes of edge node-1 are down
@@ -180,6 +203,9 @@ class DepositionSim:
         armed = self.contact_node
         while self.contact_node < rod.n_nodes - 2:
             c = self.contact_node
+            if c == armed and rod.q[4 * c + 1] <= self._landing_tol():
+                self._deposit(c)
+                continue
             if rod.q[4 * c + 1] <= 0.0:
                 self._deposit(c)
                 continue
@@ -192,8 +218,8 @@ class DepositionSim:
                 continue
             self.beta0 = beta
             break
-        rod.vdw[0] = self.contact_node
-        rod.vdw[1] = self.params.vdw_energy * self.delta / self.beta0
+        rod.vdw[VDW_NODE] = self.contact_node
+        rod.vdw[VDW_BETA0] = self.beta0
 
     def _inject(self) -> None:
         """Append nodes at the free top while it is below H - delta (physics.md §4)."""
@@ -216,7 +242,7 @@ class DepositionSim:
         self._archive(self.rod.nodes[:extra])
         self.rod.drop_front(extra)
         self.n_deposited -= extra
-        self.rod.vdw[0] = self.contact_node
+        self.rod.vdw[VDW_NODE] = self.contact_node
 
     def _archive(self, points: np.ndarray) -> None:
         n = self._n_archived
@@ -258,9 +284,7 @@ class DepositionSim:
         state = self._light_state() if cfg.mode == "event" else None
         rod.step(dt)
         taken = dt
-        # tolerance relative to the contact node's start height delta sin(beta0): an
-        # overshoot of y below 0 adds (e_v delta / beta0) |beta| of spurious vdW work
-        tol = cfg.event_tol * self.delta * math.sin(self.beta0)
+        tol = self._landing_tol()
         if cfg.mode == "event" and rod.q[k_y] < -tol:
             # touchdown inside the step: regula falsi on the step length, each trial taken
             # from the step start, until the contact node lands within tol of y = 0
@@ -289,12 +313,17 @@ class DepositionSim:
         self._delete()
         return taken
 
+    def _landing_tol(self) -> float:
+        """|y_c| within which a touchdown counts as landed: relative to the contact node's
+        start height delta sin(beta0), since an overshoot below 0 adds
+        (e_v delta / beta0) |beta| of spurious vdW work."""
+        return self.config.contact.event_tol * self.delta * math.sin(max(self.beta0, 1e-12))
+
     def _vdw_force(self, y: float) -> float:
-        """F_y on the contact node at height y (the same clamp as forces.add_vdw)."""
-        root_sq = self.delta**2 - y * y
-        floor = self.config.contact.sqrt_clamp * self.delta
-        root = math.sqrt(root_sq) if root_sq > floor * floor else floor
-        return -self.rod.vdw[1] / root
+        """F_y on the contact node at height y (forces.vdw_pull, as in the solve)."""
+        v = self.rod.vdw
+        return vdw_pull(y, v[VDW_BETA0], v[VDW_DELTA], v[VDW_CLAMP], v[VDW_ENERGY],
+                        int(v[VDW_PROFILE]))[0]  # fmt: skip
 
     def advance(self, duration: float) -> None:
         """Advance by ``duration`` with the configured dt (the last step is shortened)."""
@@ -349,6 +378,7 @@ class DepositionSim:
             "halvings": r.halvings, "events": self.events,
             "immediate_deposits": self.immediate_deposits, "n_nodes": r.n_nodes,
             "deposited_length": self.deposited_length, "vdw_work": self.vdw_work,
+            "sticking_loss": self.sticking_loss,
         }  # fmt: skip
 
     # ---- exact snapshot and restore ---------------------------------------------------
@@ -356,7 +386,7 @@ class DepositionSim:
         return {
             "rod": self.rod.snapshot(), "n_deposited": self.n_deposited, "beta0": self.beta0,
             "trace": self._trace[: self._n_archived].copy(), "time": self.time,
-            "vdw_work": self.vdw_work, "events": self.events,
+            "vdw_work": self.vdw_work, "events": self.events, "sticking_loss": self.sticking_loss,
             "immediate_deposits": self.immediate_deposits,
         }  # fmt: skip
 
@@ -369,6 +399,7 @@ class DepositionSim:
         self._archive(snap["trace"])
         self.time = snap["time"]
         self.vdw_work = snap["vdw_work"]
+        self.sticking_loss = snap["sticking_loss"]
         self.events = snap["events"]
         self.immediate_deposits = snap["immediate_deposits"]
 

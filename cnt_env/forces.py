@@ -29,6 +29,10 @@ from .rod.banded import KL, KU
 _DIAG = KL + KU
 
 DRAG_LINEAR = 0  # the small-speed-ratio free-molecular law (default)
+DRAG_PRINTED = 1  # the paper's printed eq. 2, with the extra cos/sin(alpha) factors
+DRAG_LAWS = {"linear": DRAG_LINEAR, "printed": DRAG_PRINTED}
+# |v_r| is regularised as sqrt(|v_r|^2 + eps^2) in the printed law (smooth at v_r = 0)
+PRINTED_EPS = 1e-12
 
 
 @njit(cache=True)
@@ -99,35 +103,132 @@ def add_linear_drag(
                 ab[_DIAG + k - m, b + m] -= dfb
 
 
+VDW_LINEAR = 0  # paper eq. 1: E_v linear in beta
+VDW_QUADRATIC = 1  # E_v quadratic in beta: reversible quasi-static release
+VDW_PROFILES = {"linear": VDW_LINEAR, "quadratic": VDW_QUADRATIC}
+
+# layout of the vdW parameter vector the stepper carries (Rod.vdw)
+VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY, VDW_PROFILE = range(6)
+
+
 @njit(cache=True)
-def add_vdw(
+def vdw_pull(
+    y: float, beta0: float, delta: float, clamp: float, e_v: float, profile: int
+) -> tuple[float, float]:
+    """Vertical vdW force F_y on the contact node at height y, and dF_y/dy.
+
+    beta is the contact edge's angle, sin(beta) = y / delta; the energy of the contact
+    edge releases e_v delta as beta goes from beta0 to 0:
+
+    * linear (paper eq. 1): E_v = (e_v delta / beta0)(beta - beta0),
+      F_y = -(e_v delta / beta0) / sqrt(delta^2 - y^2). The torque is constant while the
+      bending resistance falls to zero, so in a quasi-static lay-down half of e_v delta is
+      released as a snap; the contact curvature it sustains tends to 1/L_vb.
+    * quadratic: E_v = e_v delta (beta^2 / beta0^2 - 1), F_y = -2 e_v delta beta /
+      (beta0^2 sqrt(delta^2 - y^2)). The torque falls linearly with beta like the bending
+      resistance, so the release is reversible and the contact curvature tends to the
+      continuum adhesion value sqrt(2 e_v / k_b) = sqrt(2) / L_vb.
+
+    sqrt(delta^2 - y^2) is clamped from below at ``clamp * delta`` (there dF/dy = 0).
+    """
+    root_sq = delta * delta - y * y
+    floor = clamp * delta
+    if root_sq <= floor * floor:
+        beta = math.copysign(math.acos(clamp), y)
+        if profile == VDW_LINEAR:
+            return -e_v * delta / (beta0 * floor), 0.0
+        return -2.0 * e_v * delta * beta / (beta0 * beta0 * floor), 0.0
+    root = math.sqrt(root_sq)
+    if profile == VDW_LINEAR:
+        c = e_v * delta / beta0
+        return -c / root, -c * y / (root * root_sq)
+    beta = math.asin(y / delta)
+    c = 2.0 * e_v * delta / (beta0 * beta0)
+    return -c * beta / root, -c * (1.0 / root_sq + beta * y / (root * root_sq))
+
+
+@njit(cache=True)
+def add_vdw(q: np.ndarray, vdw: np.ndarray, force: np.ndarray, ab: np.ndarray) -> None:
+    """Add the vdW pull on the contact node c (``vdw`` laid out as VDW_*) and its
+    contribution -dF_y/dy to the residual Jacobian."""
+    node = int(vdw[VDW_NODE])
+    if node < 0:
+        return
+    k = 4 * node + 1  # y DOF of node c
+    f, dfdy = vdw_pull(q[k], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP],
+                       vdw[VDW_ENERGY], int(vdw[VDW_PROFILE]))  # fmt: skip
+    force[k] += f
+    ab[_DIAG, k] -= dfdy
+
+
+@njit(cache=True)
+def add_printed_drag(
     q: np.ndarray,
-    node: int,
-    coef: float,
-    delta: float,
-    sqrt_clamp: float,
+    q_old: np.ndarray,
+    dt: float,
+    n_nodes: int,
+    rest_lengths: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
     force: np.ndarray,
     ab: np.ndarray,
     with_jacobian: bool,
 ) -> None:
-    """vdW pull on the contact node c (paper eq. 1, physics.md §4).
+    """Drag with the paper's printed angle factors (physics.md §4, [choice]):
 
-    E_v = coef (beta - beta0) with coef = e_v delta / beta0 and sin(beta) = y_c / delta, so
-    F_y = -coef / sqrt(delta^2 - y_c^2). The root is clamped from below at
-    ``sqrt_clamp * delta`` (beyond the clamp the force is constant and its derivative 0).
-    Integrated from beta0 to 0 it releases exactly e_v delta.
+        F_a = mu [sigma cos(alpha) (v_r.t) t + C_sigma sin(alpha) (v_r - (v_r.t) t)],
+
+    alpha the angle between v_r and the edge (cos alpha = |v_r.t|/|v_r|). It equals the
+    linear law for purely axial or purely normal motion and is weaker in between. The
+    Jacobian holds the exact velocity part; the tangent's dependence on q is left out
+    (Newton then converges linearly in that term; the step is still implicit in v).
     """
-    if node < 0:
-        return
-    k = 4 * node + 1  # y DOF of node c
-    y = q[k]
-    root_sq = delta * delta - y * y
-    floor = sqrt_clamp * delta
-    if root_sq <= floor * floor:
-        force[k] -= coef / floor
-        return
-    root = math.sqrt(root_sq)
-    force[k] -= coef / root
-    if with_jacobian:
-        # residual Jacobian gets -dF_y/dy = coef * y / root^3
-        ab[_DIAG, k] += coef * y / (root * root_sq)
+    t = np.empty(3)
+    vr = np.empty(3)
+    b = np.empty(3)
+    jac = np.empty((3, 3))
+    for j in range(n_nodes - 1):
+        if not drag_on[j]:
+            continue
+        a = 4 * j
+        c = a + 4
+        ln = 0.0
+        for k in range(3):
+            t[k] = q[c + k] - q[a + k]
+            ln += t[k] * t[k]
+        ln = math.sqrt(ln)
+        for k in range(3):
+            t[k] /= ln
+            vr[k] = flow[k] - 0.5 * (q[a + k] - q_old[a + k] + q[c + k] - q_old[c + k]) / dt
+        ax = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
+        nb2 = 0.0
+        for k in range(3):
+            b[k] = vr[k] - ax * t[k]
+            nb2 += b[k] * b[k]
+        nv = math.sqrt(ax * ax + nb2 + PRINTED_EPS * PRINTED_EPS)
+        nb = math.sqrt(nb2 + PRINTED_EPS * PRINTED_EPS)
+        coef = rest_lengths[j] * mu
+        for k in range(3):
+            fk = coef * (sigma * abs(ax) * ax * t[k] + c_sigma * nb * b[k]) / nv
+            force[a + k] += 0.5 * fk
+            force[c + k] += 0.5 * fk
+        if not with_jacobian:
+            continue
+        # dF/dv_r: axial g = sigma a|a|/|v| t, normal h = C |b| b / |v|
+        for k in range(3):
+            for m in range(3):
+                pkm = (1.0 if k == m else 0.0) - t[k] * t[m]
+                dg = sigma * t[k] * (2.0 * abs(ax) * t[m] / nv - ax * abs(ax) * vr[m] / nv**3)
+                dh = c_sigma * ((b[k] * b[m] / nb + nb * pkm) / nv - nb * b[k] * vr[m] / nv**3)
+                jac[k, m] = coef * (dg + dh)
+        cv = 0.25 / dt  # dv_r/dx = -1/(2 dt) per node, half the edge force per node
+        for k in range(3):
+            for m in range(3):
+                d = cv * jac[k, m]  # = -dF_node/dx_any; the residual Jacobian gets +d
+                ab[_DIAG + k - m, a + m] += d
+                ab[_DIAG + k - m - 4, c + m] += d
+                ab[_DIAG + k - m + 4, a + m] += d
+                ab[_DIAG + k - m, c + m] += d

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..forces import add_linear_drag, add_vdw
+from ..forces import DRAG_LAWS, DRAG_LINEAR, add_linear_drag, add_printed_drag, add_vdw
 from . import elastic, frames
 from .banded import (
     KL,
@@ -104,13 +104,21 @@ class RodMaterial:
 
 @dataclass(frozen=True)
 class DragParams:
-    """Linear rarefied drag (paper eq. 2): axial sigma*mu, normal c_sigma*mu."""
+    """Rarefied drag (paper eq. 2): axial sigma*mu, normal c_sigma*mu; ``law`` is
+    ``"linear"`` (default) or ``"printed"`` (forces.add_printed_drag)."""
 
     mu: float = 1.0
     sigma: float = 1.0
     c_sigma: float = 2.29
+    law: str = "linear"
+
+    @property
+    def law_code(self) -> int:
+        return DRAG_LAWS[self.law]
 
     def __post_init__(self) -> None:
+        if self.law not in DRAG_LAWS:
+            raise ValueError(f"drag law must be one of {list(DRAG_LAWS)}, got {self.law!r}")
         for name in ("mu", "sigma", "c_sigma"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -179,6 +187,7 @@ def assemble(
     mu: float,
     sigma: float,
     c_sigma: float,
+    drag_law: int,
     vdw: np.ndarray,
     force: np.ndarray,
     ab: np.ndarray,
@@ -193,10 +202,15 @@ def assemble(
     band_zero(ab, n_dof)
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, True)
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True)
-    add_linear_drag(
-        q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
-    )
-    add_vdw(q, int(vdw[0]), vdw[1], vdw[2], vdw[3], force, ab, True)
+    if drag_law == DRAG_LINEAR:
+        add_linear_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
+        )
+    else:
+        add_printed_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
+        )
+    add_vdw(q, vdw, force, ab)
     res = 0.0
     for k in range(n_dof):
         if fixed[k]:
@@ -234,6 +248,7 @@ def newton_solve(
     mu: float,
     sigma: float,
     c_sigma: float,
+    drag_law: int,
     vdw: np.ndarray,
     tol_abs: float,
     update_abs: float,
@@ -269,7 +284,7 @@ def newton_solve(
             break
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                       flow, mu, sigma, c_sigma, vdw, force, ab, rhs)  # fmt: skip
+                       flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
@@ -341,8 +356,8 @@ class Rod:
         self.max_nodes = cap
         self._allocate(cap)
         self.flow = np.zeros(3)
-        # vdW contact (forces.add_vdw): [node (-1: none), e_v delta / beta0, delta, clamp]
-        self.vdw = np.array([-1.0, 0.0, 1.0, 0.05])
+        # vdW contact, laid out as forces.VDW_*: node -1 means no contact force
+        self.vdw = np.array([-1.0, 1.0, 1.0, 0.05, 1.0, 0.0])
         self.time = 0.0
         self.steps = 0
         self.newton_iterations = 0
@@ -538,7 +553,7 @@ class Rod:
             self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
             self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
             self.tangents_old, self.d1_old, self.ref_twist_old,
-            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, self.vdw,
+            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
             o.residual_tol * o.force_scale,
             o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
             o.max_iter,
