@@ -78,6 +78,11 @@ class DepositionConfig:
     """Everything that defines a deposition run, in dimensionless units.
 
     ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py).
+
+    Graded discretisation [choice, physics.md §6]: with ``coarse_delta`` set, edges are
+    injected at the top with that length and split into edges of ``delta_bar`` once they
+    come within ``fine_length`` (arc length) of the contact node, where the curvature
+    lives. ``None`` keeps the rod uniform at ``delta_bar``.
     ``dt`` defaults to ``dt_factor * Hbar``: the time to deposit ``dt_factor`` L_vb at the
     speed scale 1/Hbar, whatever delta (the dynamics near the contact are set by L_vb, not
     by delta; touchdowns are located inside a step by the event search). ``initial_radius``
@@ -90,6 +95,8 @@ class DepositionConfig:
     dt_factor: float = 0.05
     initial_radius: float = 6.4
     perturbation: float = 1e-3
+    coarse_delta: float | None = None
+    fine_length: float = 20.0
     drag_law: str = "linear"
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
@@ -107,6 +114,17 @@ class DepositionConfig:
             )
         if self.initial_radius >= p.Hbar:
             raise ValueError("initial_radius must be below Hbar")
+        if self.coarse_delta is not None and not (
+            math.isfinite(self.coarse_delta)
+            and self.coarse_delta >= p.delta_bar
+            and abs(self.coarse_delta / p.delta_bar - round(self.coarse_delta / p.delta_bar)) < 1e-9
+        ):
+            raise ValueError(
+                f"coarse_delta must be a whole multiple of delta_bar = {p.delta_bar}, got "
+                f"{self.coarse_delta!r}"
+            )
+        if not (math.isfinite(self.fine_length) and self.fine_length > 0):
+            raise ValueError(f"fine_length must be finite and > 0, got {self.fine_length!r}")
         if not (math.isfinite(self.perturbation) and self.perturbation >= 0):
             raise ValueError(f"perturbation must be finite and >= 0, got {self.perturbation!r}")
 
@@ -139,13 +157,14 @@ class DepositionSim:
         )  # fmt: skip
         drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma, law=config.drag_law)
         rng = np.random.default_rng(seed)
-        nodes = initial_shape(p.Hbar, config.initial_radius, self.delta)
+        self.inject_delta = config.coarse_delta or self.delta
+        nodes, rest = initial_shape(p.Hbar, config.initial_radius, self.delta,
+                                    self.inject_delta, config.fine_length)  # fmt: skip
         n_dep = 2  # nodes 0 and 1 lie on the substrate: the clamp of the deposited trace
         nodes[n_dep:, 2] += (
             config.perturbation * self.delta * rng.standard_normal(len(nodes) - n_dep)
         )
-        self.rod = Rod(nodes, material, drag=drag, options=config.newton,
-                       rest_lengths=np.full(len(nodes) - 1, self.delta),
+        self.rod = Rod(nodes, material, drag=drag, options=config.newton, rest_lengths=rest,
                        max_nodes=len(nodes) + 64)  # fmt: skip
         self.rod.flow[:] = p.flow_velocity
         self.rod.vdw[VDW_DELTA] = self.delta
@@ -153,6 +172,7 @@ class DepositionSim:
         self.rod.vdw[VDW_ENERGY] = p.vdw_energy
         self.rod.vdw[VDW_PROFILE] = VDW_PROFILES[config.contact.vdw_profile]
         self.n_deposited = 0
+        self._deposited_length = -self.delta  # node 0 -> 1 is the initial clamp, not laid
         self._trace = np.zeros((1024, 3))
         self._n_archived = 0
         self.time = 0.0
@@ -193,6 +213,7 @@ class DepositionSim:
         self.substrate.deposit(self.rod, node)
         if node >= 1:
             self.rod.fix_theta(node - 1)  # both nodes of edge node-1 are down
+            self._deposited_length += self.rod.rest_lengths[node - 1]
         self.n_deposited += 1
 
     def _settle_contact(self) -> None:
@@ -227,12 +248,26 @@ class DepositionSim:
         while True:
             n = rod.n_nodes
             top = rod.q[4 * (n - 1) : 4 * (n - 1) + 3]
-            if top[1] >= self.params.Hbar - self.delta:
+            if top[1] >= self.params.Hbar - self.inject_delta:
                 return
             prev = rod.q[4 * (n - 2) : 4 * (n - 2) + 3]
             t = (top - prev) / np.linalg.norm(top - prev)
-            rod.append_node(top + self.delta * t, rod.u[4 * (n - 1) : 4 * (n - 1) + 3].copy(),
-                            self.delta)  # fmt: skip
+            d = self.inject_delta
+            rod.append_node(top + d * t, rod.u[4 * (n - 1) : 4 * (n - 1) + 3].copy(), d)
+
+    def _refine(self) -> None:
+        """Split coarse edges that came within ``fine_length`` of the contact node."""
+        if self.inject_delta == self.delta:
+            return
+        rod = self.rod
+        arc = 0.0
+        j = self.contact_node - 1
+        while j < rod.n_nodes - 1 and arc < self.config.fine_length:
+            n_sub = round(rod.rest_lengths[j] / self.delta)
+            if n_sub > 1:
+                rod.split_edge(j, n_sub)
+            arc += rod.rest_lengths[j]
+            j += 1
 
     def _delete(self) -> None:
         """Archive and drop deposited nodes the solve no longer needs."""
@@ -310,6 +345,7 @@ class DepositionSim:
         self.substrate.after_step(rod, self.n_deposited)
         self._settle_contact()
         self._inject()
+        self._refine()
         self._delete()
         return taken
 
@@ -363,8 +399,8 @@ class DepositionSim:
 
     @property
     def deposited_length(self) -> float:
-        """Arc length of trace laid since the start (excludes the two initial nodes)."""
-        return (self.n_trace - 2) * self.delta
+        """Rest arc length of trace laid since the start (the initial clamp edge excluded)."""
+        return self._deposited_length
 
     @property
     def suspended_nodes(self) -> np.ndarray:
@@ -385,6 +421,7 @@ class DepositionSim:
     def snapshot(self) -> dict:
         return {
             "rod": self.rod.snapshot(), "n_deposited": self.n_deposited, "beta0": self.beta0,
+            "deposited_length": self._deposited_length,
             "trace": self._trace[: self._n_archived].copy(), "time": self.time,
             "vdw_work": self.vdw_work, "events": self.events, "sticking_loss": self.sticking_loss,
             "immediate_deposits": self.immediate_deposits,
@@ -394,6 +431,7 @@ class DepositionSim:
         self.rod.restore(snap["rod"])
         self.n_deposited = snap["n_deposited"]
         self.beta0 = snap["beta0"]
+        self._deposited_length = snap["deposited_length"]
         self._trace = np.zeros((max(1024, 2 * len(snap["trace"])), 3))
         self._n_archived = 0
         self._archive(snap["trace"])
@@ -404,23 +442,36 @@ class DepositionSim:
         self.immediate_deposits = snap["immediate_deposits"]
 
 
-def initial_shape(height: float, radius: float, delta: float) -> np.ndarray:
-    """Start-up state (physics.md §4): two nodes on the substrate behind the origin's
-    neighbour, an arc of radius R_i from flat to vertical, then a vertical straight part up
-    to y = height. Consecutive nodes are exactly delta apart (chords)."""
+def initial_shape(
+    height: float,
+    radius: float,
+    delta: float,
+    coarse_delta: float | None = None,
+    fine_length: float = math.inf,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Start-up state (physics.md §4): a node on the substrate behind the origin, an arc
+    of radius R_i from flat to vertical, then a vertical straight part up to y = height.
+    Consecutive nodes are exactly delta apart (chords); with ``coarse_delta``, spacing
+    switches to it once the arc length from the origin exceeds ``fine_length``.
+    Returns the nodes and the nominal rest lengths of the edges."""
+    coarse = coarse_delta or delta
     pts = [np.array([-delta, 0.0, 0.0]), np.array([0.0, 0.0, 0.0])]
+    rest = [delta]
     dphi = 2.0 * math.asin(delta / (2.0 * radius))
     phi = dphi
     while phi < 0.5 * math.pi:
         pts.append(np.array([radius * math.sin(phi), radius * (1.0 - math.cos(phi)), 0.0]))
+        rest.append(delta)
         phi += dphi
-    # continue straight up from the last arc point, by chords of length delta
     last = pts[-1]
-    top_x = radius
-    # first vertical node: on x = radius, delta from the last arc node
-    dx = top_x - last[0]
+    arc = (len(pts) - 2) * delta
+    dx = radius - last[0]  # first vertical node: on x = radius, delta from the last arc node
     y = last[1] + math.sqrt(max(delta * delta - dx * dx, 0.0))
+    step = delta
     while y <= height + 1e-9:
-        pts.append(np.array([top_x, y, 0.0]))
-        y += delta
-    return np.array(pts)
+        pts.append(np.array([radius, y, 0.0]))
+        rest.append(step)
+        step = delta if arc < fine_length else coarse
+        arc += step
+        y += step
+    return np.array(pts), np.array(rest)

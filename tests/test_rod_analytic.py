@@ -142,3 +142,33 @@ def test_bad_dt_rejected() -> None:
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="dt"):
             rod.step(bad)
+
+
+def test_split_edge_preserves_shape_energy_and_mass() -> None:
+    """Splitting an edge of a bent, twisted, stretched rod into collinear sub-edges keeps
+    the stretch energy and the total mass, puts zero curvature and twist at the new nodes,
+    and leaves the other nodes where they were."""
+    from cnt_env.rod.elastic import stretch_energy
+
+    n_edges = 8
+    s = np.linspace(0, 2.0, n_edges + 1)
+    nodes = np.stack([np.sin(s), 1 - np.cos(s), 0.1 * s], axis=1)
+    rest = 0.95 * np.linalg.norm(np.diff(nodes, axis=0), axis=1)  # pre-stretched
+    rod = Rod(nodes, RodMaterial(k_s=1e3, k_b=1.0, k_t=0.5, rho=2.0, r0=0.01),
+              rest_lengths=rest)  # fmt: skip
+    rod.thetas[:] = 0.1 * np.arange(n_edges)
+    mass_before = rod.mass[0 : rod.n_dof : 4].sum()
+    e_s = stretch_energy(rod.q, rod.n_nodes, rod.rest_lengths, 1e3)
+    rod.split_edge(3, 4)
+    assert rod.n_nodes == n_edges + 1 + 3
+    np.testing.assert_allclose(rod.mass[0 : rod.n_dof : 4].sum(), mass_before, rtol=1e-14)
+    np.testing.assert_array_equal(rod.nodes[:4], nodes[:4])
+    np.testing.assert_array_equal(rod.nodes[7:], nodes[4:])
+    np.testing.assert_allclose(rod.rest_lengths[3:7], rest[3] / 4)
+    e_s_after = stretch_energy(rod.q, rod.n_nodes, rod.rest_lengths, 1e3)
+    assert e_s_after == pytest.approx(e_s, rel=1e-12)
+    rod.elastic_energy()  # refreshes strains
+    np.testing.assert_allclose(rod._kappa[4:7], 0.0, atol=1e-12)
+    np.testing.assert_allclose(rod._twist[4:7], 0.0, atol=1e-12)
+    rod.step(1e-3)
+    assert np.all(np.isfinite(rod.q[: rod.n_dof]))

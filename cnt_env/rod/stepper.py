@@ -446,6 +446,53 @@ class Rod:
         self.n_nodes = n + 1
         self.update_mass()
 
+    def split_edge(self, j: int, n_sub: int) -> None:
+        """Split edge j into ``n_sub`` equal collinear edges (graded discretisation).
+
+        The new nodes lie on the straight edge with linearly interpolated velocities; the
+        sub-edges inherit theta and the reference director of edge j, so the split adds no
+        stretch, twist or bending at the new nodes. Mass is redistributed by
+        :meth:`update_mass` (total mass is conserved).
+        """
+        if n_sub < 2:
+            return
+        n = self.n_nodes
+        if not 0 <= j < n - 1:
+            raise ValueError(f"edge {j} out of range")
+        k = n_sub - 1
+        if n + k > self.max_nodes:
+            self._allocate(max(2 * self.max_nodes, n + k))
+        a = 4 * (j + 1)  # first DOF of node j+1
+        for name in self._DOF_BUFFERS:
+            buf = getattr(self, name)
+            buf[a + 4 * k : 4 * (n + k)] = buf[a : 4 * n].copy()
+        for name in self._EDGE_BUFFERS:
+            buf = getattr(self, name)
+            buf[j + 1 + k : n - 1 + k] = buf[j + 1 : n - 1].copy()
+            buf[j + 1 : j + 1 + k] = buf[j]
+        for name in self._NODE_BUFFERS:
+            buf = getattr(self, name)
+            buf[j + 1 + k : n + k] = buf[j + 1 : n].copy()
+        x0 = self.q[4 * j : 4 * j + 3].copy()
+        x1 = self.q[a + 4 * k : a + 4 * k + 3].copy()
+        u0 = self.u[4 * j : 4 * j + 3].copy()
+        u1 = self.u[a + 4 * k : a + 4 * k + 3].copy()
+        theta = self.q[4 * j + 3]
+        omega = self.u[4 * j + 3]
+        for m in range(k):
+            w = (m + 1) / n_sub
+            b = a + 4 * m
+            self.q[b : b + 3] = (1 - w) * x0 + w * x1
+            self.u[b : b + 3] = (1 - w) * u0 + w * u1
+            self.q[b + 3] = theta
+            self.u[b + 3] = omega
+            self.fixed[b : b + 4] = 0
+            self.ext_force[b : b + 4] = 0.0
+            self.ref_twist_old[j + 1 + m] = 0.0
+        self.rest_lengths[j : j + n_sub] = self.rest_lengths[j] / n_sub
+        self.n_nodes = n + k
+        self.update_mass()
+
     def drop_front(self, k: int) -> None:
         """Remove the first k nodes (deletion of the far deposited tail, physics.md §4)."""
         if k <= 0:

@@ -1,0 +1,151 @@
+"""The deposition simulator: contact bookkeeping, snapshot/restore, determinism,
+invariance, bad input. Small rods (Hbar = 30) keep this fast; the paper-scale
+validations live in benchmarks/ and the slow tests."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cnt_env.deposition import ContactOptions, DepositionConfig, DepositionSim, initial_shape
+from cnt_env.rod.stepper import NewtonOptions, SimulationError
+from cnt_env.units import PhysicalParams, paper_groups
+
+
+def small_config(**kw) -> DepositionConfig:
+    params = paper_groups("coil", Hbar=30.0, Ibar=200.0)
+    return DepositionConfig(params=params, initial_radius=4.0, **kw)
+
+
+def test_initial_shape_is_arc_then_vertical_with_exact_spacing() -> None:
+    nodes, rest = initial_shape(height=30.0, radius=4.0, delta=1.0)
+    gaps = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
+    np.testing.assert_allclose(gaps, 1.0, rtol=1e-12)
+    np.testing.assert_array_equal(rest, 1.0)
+    assert nodes[0, 1] == 0.0 and nodes[1, 1] == 0.0
+    assert np.all(nodes[2:, 1] > 0.0)
+    assert nodes[-1, 1] <= 30.0 and nodes[-1, 1] > 29.0
+    np.testing.assert_allclose(nodes[-5:, 0], 4.0)
+
+
+def test_deposits_lays_trace_and_keeps_height() -> None:
+    sim = DepositionSim(small_config(), seed=1)
+    sim.run(8.0)
+    trace = sim.trace()
+    assert sim.deposited_length >= 8.0
+    np.testing.assert_array_equal(trace[:, 1], 0.0)  # every deposited node on y = 0
+    gaps = np.linalg.norm(np.diff(trace, axis=0), axis=1)
+    np.testing.assert_allclose(gaps, 1.0, rtol=2e-2)  # edges stay near their rest length
+    top = sim.rod.nodes[-1]
+    assert 30.0 - 1.0 - 0.1 <= top[1] <= 30.0 + 0.1  # injection keeps the height
+    # vdW releases e_v per deposited length (paper eq. 1 integrates to e_v delta)
+    assert sim.vdw_work / sim.deposited_length == pytest.approx(1.0, abs=0.03)
+    # only the last two deposited nodes stay in the solve on the sticky substrate
+    assert sim.n_deposited == 2
+
+
+def test_same_seed_is_bit_identical_and_seed_matters() -> None:
+    a = DepositionSim(small_config(), seed=3)
+    b = DepositionSim(small_config(), seed=3)
+    c = DepositionSim(small_config(), seed=4)
+    for sim in (a, b, c):
+        sim.run(3.0)
+    np.testing.assert_array_equal(a.trace(), b.trace())
+    np.testing.assert_array_equal(a.rod.q, b.rod.q)
+    assert not np.array_equal(a.rod.q[: a.rod.n_dof], c.rod.q[: c.rod.n_dof])
+
+
+def test_snapshot_restore_continues_bit_identically() -> None:
+    sim = DepositionSim(small_config(), seed=5)
+    sim.run(2.0)
+    snap = sim.snapshot()
+    for _ in range(60):
+        sim.step()
+    trace_a, q_a, t_a = sim.trace(), sim.rod.q.copy(), sim.time
+    other = DepositionSim(small_config(), seed=99)  # a different state, then restored
+    other.restore(snap)
+    for _ in range(60):
+        other.step()
+    np.testing.assert_array_equal(other.trace(), trace_a)
+    np.testing.assert_array_equal(other.rod.q[: other.rod.n_dof], q_a[: sim.rod.n_dof])
+    assert other.time == t_a
+
+
+@pytest.mark.parametrize("mode", ["event", "project"])
+def test_contact_modes_both_run(mode: str) -> None:
+    sim = DepositionSim(small_config(contact=ContactOptions(mode=mode)), seed=0)
+    sim.run(4.0)
+    if mode == "event":
+        assert sim.events > 0
+    assert sim.deposited_length >= 4.0
+
+
+def test_graded_mesh_splits_near_contact_and_lays_fine_trace() -> None:
+    params = paper_groups("coil", Hbar=30.0, Ibar=200.0, delta_bar=0.5)
+    cfg = DepositionConfig(params=params, initial_radius=4.0, coarse_delta=2.0, fine_length=6.0)
+    sim = DepositionSim(cfg, seed=0)
+    n0 = sim.rod.n_nodes
+    sim.run(6.0)
+    rest = sim.rod.rest_lengths[: sim.rod.n_nodes - 1]
+    assert set(np.round(np.unique(rest), 9)) <= {0.5, 2.0}
+    assert rest[-1] == 2.0 and rest[0] == 0.5
+    gaps = np.linalg.norm(np.diff(sim.trace(), axis=0), axis=1)
+    np.testing.assert_allclose(gaps, 0.5, rtol=3e-2)
+    assert sim.rod.n_nodes < 30.0 / 0.5  # cheaper than uniform
+    assert n0 < 60
+
+
+def test_si_input_with_kb_times_ten_gives_the_same_trace() -> None:
+    """physics.md §6 invariance: k_b x10 with H and rho rescaled to keep Hbar and Ibar
+    gives the same trace in L_vb units."""
+    base = PhysicalParams(
+        k_b=2.7e-24, k_s=2.9e-6, k_t=2.7e-24, e_v=4.39e-10, rho=8.1e-15, mu=5.11e-7,
+        H=2.4e-6, r0=1.356e-9, delta=None,
+    )  # fmt: skip
+    scaled = PhysicalParams(
+        k_b=2.7e-23, k_s=2.9e-6, k_t=2.7e-23, e_v=4.39e-10, rho=8.1e-14, mu=5.11e-7,
+        H=2.4e-6 * math.sqrt(10), r0=1.356e-9, delta=None,
+    )  # fmt: skip
+    groups = [p.to_dimensionless() for p in (base, scaled)]
+    # k_s/e_v is unchanged; r0_bar scales but only enters the negligible theta inertia,
+    # so pin it to make the comparison about the groups that matter
+    groups = [paper_groups("coil", Hbar=g.Hbar, Ibar=g.Ibar, ks_over_ev=g.ks_over_ev,
+                           r0_bar=groups[0].r0_bar) for g in groups]  # fmt: skip
+    assert groups[0].Hbar == pytest.approx(groups[1].Hbar, rel=1e-12)
+    assert groups[0].Ibar == pytest.approx(groups[1].Ibar, rel=1e-12)
+    traces = []
+    for g in groups:
+        sim = DepositionSim(DepositionConfig(params=g, initial_radius=4.0), seed=0)
+        sim.run(4.0)
+        traces.append(sim.trace())
+    assert traces[0].shape == traces[1].shape
+    np.testing.assert_allclose(traces[0], traces[1], atol=1e-6)
+
+
+def test_bad_config_rejected_with_named_parameter() -> None:
+    params = paper_groups("coil")
+    with pytest.raises(ValueError, match="dt"):
+        DepositionConfig(params=params, dt=-1.0)
+    with pytest.raises(ValueError, match="initial_radius"):
+        DepositionConfig(params=params, initial_radius=float("nan"))
+    with pytest.raises(ValueError, match="coarse_delta"):
+        DepositionConfig(params=params, coarse_delta=1.5)
+    with pytest.raises(ValueError, match="mode"):
+        ContactOptions(mode="teleport")
+    sim = DepositionSim(small_config(), seed=0)
+    with pytest.raises(ValueError, match="flow"):
+        sim.set_flow(float("nan"), 0.0)
+
+
+def test_newton_failure_raises_simulation_error_with_state() -> None:
+    cfg = small_config(newton=NewtonOptions(max_iter=1, max_halvings=0, residual_tol=1e-14))
+    sim = DepositionSim(cfg, seed=0)
+    with pytest.raises(SimulationError) as info:
+        for _ in range(50):
+            sim.step()
+    err = info.value
+    assert err.step >= 0 and math.isfinite(err.time)
+    assert np.all(np.isfinite(err.state["q"]))
+    assert "did not converge" in str(err)
