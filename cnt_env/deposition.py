@@ -30,6 +30,7 @@ from .forces import (
     VDW_ENERGY,
     VDW_NODE,
     VDW_PROFILE,
+    VDW_KB,
     VDW_PROFILES,
     vdw_pull,
 )
@@ -50,7 +51,8 @@ class ContactOptions:
       step, as in the paper's description.
     * ``beta0_min``: a new contact edge flatter than this (rad) deposits at once.
     * ``sqrt_clamp``: sqrt(delta^2 - y_c^2) is clamped below at this times delta.
-    * ``vdw_profile``: ``"linear"`` (paper eq. 1) or ``"quadratic"`` (forces.vdw_pull).
+    * ``vdw_profile``: ``"linear"`` (paper eq. 1), ``"quadratic"`` or ``"moment"``
+      (forces.vdw_pull).
     * A contact node is deposited once y_c <= ``event_tol * delta * sin(beta0)`` (the
       vdW energy it still holds is then below 2% (linear) or 1e-4 (quadratic) of e_v delta).
     """
@@ -359,7 +361,7 @@ class DepositionSim:
         """F_y on the contact node at height y (forces.vdw_pull, as in the solve)."""
         v = self.rod.vdw
         return vdw_pull(y, v[VDW_BETA0], v[VDW_DELTA], v[VDW_CLAMP], v[VDW_ENERGY],
-                        int(v[VDW_PROFILE]))[0]  # fmt: skip
+                        int(v[VDW_PROFILE]), v[VDW_KB])[0]  # fmt: skip
 
     def advance(self, duration: float) -> None:
         """Advance by ``duration`` with the configured dt (the last step is shortened)."""

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnt_env.forces import VDW_LINEAR, VDW_QUADRATIC, add_linear_drag, add_printed_drag, add_vdw
+from cnt_env.forces import (
+    VDW_LINEAR,
+    VDW_MOMENT,
+    VDW_QUADRATIC,
+    add_linear_drag,
+    add_printed_drag,
+    add_vdw,
+)
 from cnt_env.rod.banded import KL, KU, LDAB
 from tests.rodkit import random_rod
 
@@ -82,11 +89,11 @@ def test_printed_law_matches_linear_for_axial_and_normal_motion() -> None:
         np.testing.assert_allclose(f_pr, f_lin, rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.parametrize("profile", [VDW_LINEAR, VDW_QUADRATIC])
+@pytest.mark.parametrize("profile", [VDW_LINEAR, VDW_QUADRATIC, VDW_MOMENT])
 @pytest.mark.parametrize("y", [0.9, 0.3, 0.01, -0.2, 0.999])
 def test_vdw_force_and_jacobian(y: float, profile: int) -> None:
     delta, beta0, clamp, e_v = 1.0, 0.4, 0.05, 1.3
-    vdw = np.array([2.0, beta0, delta, clamp, e_v, float(profile)])
+    vdw = np.array([2.0, beta0, delta, clamp, e_v, float(profile), 0.8])
 
     def fy(yy: float) -> tuple[float, float]:
         q = np.zeros(11)
@@ -101,6 +108,8 @@ def test_vdw_force_and_jacobian(y: float, profile: int) -> None:
     beta = np.arcsin(y / delta) if y < 0.99 else np.arccos(clamp)
     if profile == VDW_LINEAR:
         expected = -e_v * delta / beta0 / root
+    elif profile == VDW_MOMENT:
+        expected = -np.sqrt(2 * 0.8 * e_v) / root
     else:
         expected = -2 * e_v * delta * beta / beta0**2 / root
     assert f == pytest.approx(expected, rel=1e-12)
@@ -114,7 +123,7 @@ def test_vdw_releases_ev_delta_from_beta0_to_zero(profile: int) -> None:
     from scipy.integrate import quad
 
     delta, beta0, e_v = 0.8, 0.6, 1.7
-    vdw = np.array([0.0, beta0, delta, 0.05, e_v, float(profile)])
+    vdw = np.array([0.0, beta0, delta, 0.05, e_v, float(profile), 1.0])
 
     def pull(y: float) -> float:
         q = np.array([0.0, y, 0.0])

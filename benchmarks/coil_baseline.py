@@ -1,0 +1,59 @@
+"""Speed of the coil baseline: the paper's coil preset (Hbar = 253, Ibar = 2200, flat
+sticky substrate, no flow) run to 1000 L_vb deposited with the default configuration.
+
+Prints JSON: wall time (numba compilation excluded), steps, mean Newton iterations per
+step, deposited length per wall-second, and the measured coil radius.
+
+    python benchmarks/coil_baseline.py [--deposit 1000] [--delta 1.0] [--coarse-delta 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from cnt_env.deposition import DepositionConfig, DepositionSim
+from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.units import paper_groups
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--deposit", type=float, default=1000.0)
+    parser.add_argument("--delta", type=float, default=None, help="fine delta_bar")
+    parser.add_argument("--coarse-delta", type=float, default=None)
+    parser.add_argument("--transient", type=float, default=400.0)
+    args = parser.parse_args(argv)
+    overrides = {} if args.delta is None else {"delta_bar": args.delta}
+    config = DepositionConfig(params=paper_groups("coil", **overrides))
+    if args.coarse_delta is not None:
+        from dataclasses import replace
+
+        config = replace(config, coarse_delta=args.coarse_delta)
+    warm = DepositionSim(config, seed=0)
+    warm.step()  # numba compilation / cache load outside the timing
+    sim = DepositionSim(config, seed=0)
+    t0 = time.perf_counter()
+    sim.run(args.deposit)
+    wall = time.perf_counter() - t0
+    st = sim.stats()
+    m = measure(sim.trace(), MeasureOptions(transient_length=args.transient))
+    print(json.dumps({
+        "benchmark": "coil_baseline",
+        "delta_bar": config.params.delta_bar,
+        "coarse_delta": config.coarse_delta,
+        "dt": sim.dt,
+        "deposited_length": round(st["deposited_length"], 3),
+        "wall_time_s": round(wall, 2),
+        "steps": st["steps"],
+        "newton_iterations_per_step": round(st["newton_iterations"] / st["steps"], 3),
+        "deposited_per_wall_second": round(st["deposited_length"] / wall, 2),
+        "n_nodes": st["n_nodes"],
+        "coil_radius": round(m["coil_radius"], 4),
+        "pattern": m["pattern"],
+    }, indent=2))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
