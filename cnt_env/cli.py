@@ -52,16 +52,15 @@ EXIT_USAGE = 2  # bad input: argparse's code too
 DEFAULT_DEPOSIT: dict[str, float] = {"coil": 600.0, "serpentine": 1200.0}
 DEMO_DEPOSIT = 300.0  # ~15 s after the numba compile; enough for a measurable coil
 
-# Choices mirrored from forces.DRAG_LAWS, forces.VDW_PROFILES and
-# deposition.CONTACT_MODES, so that parsing does not import numba. The simulator
+# Choices mirrored from forces.DRAG_LAWS, deposition.CONTACT_MODES and
+# substrate.SLIDING_OPTIONS, so that parsing does not import numba. The simulator
 # validates them again when it is built.
 DRAG_LAWS = ("linear", "printed")
-VDW_PROFILES = ("linear", "quadratic")
 CONTACT_MODES = ("event", "project")
-
-STEPPED_NOT_READY = (
-    "stepped substrate lands with the serpentine issue; use --preset coil / --substrate flat"
-)
+SLIDING_OPTIONS = ("B", "C")
+#: start-up contact arc radius R_i (physics.md §4: ~0.5 um, 6.4 L_vb flat, 3.9 stepped)
+DEFAULT_INITIAL_RADIUS: dict[str, float] = {"flat": 6.4, "stepped": 3.9}
+DEFAULT_KAPPA_C = 0.2  # the paper's kappa_c L_vb, when --substrate stepped turns steps on
 
 # Dimensionless groups settable on the command line: argparse dest -> field.
 GROUP_FIELDS: dict[str, str] = {
@@ -170,14 +169,14 @@ def resolve_params(
     return params, physical, ignored
 
 
-def check_substrate_supported(params: units.DimensionlessParams, substrate: str) -> None:
-    """The simulator has only the flat sticky substrate so far.
-
-    The one place that refuses the stepped substrate: delete it when the stepped
-    substrate lands (serpentine issue).
-    """
-    if substrate == "stepped" or params.is_stepped:
-        raise CliError(STEPPED_NOT_READY)
+def apply_substrate(params: units.DimensionlessParams, substrate: str | None):
+    """``--substrate`` overrides the preset's: flat drops kappa_c, stepped sets the paper's
+    kappa_c = 0.2 unless the preset or --kappa-c already gives one."""
+    if substrate == "flat" and params.is_stepped:
+        return dataclasses.replace(params, kappa_c_bar=None)
+    if substrate == "stepped" and not params.is_stepped:
+        return dataclasses.replace(params, kappa_c_bar=DEFAULT_KAPPA_C)
+    return params
 
 
 @dataclass(frozen=True)
@@ -203,7 +202,9 @@ class RunSpec:
             "dt": c.time_step,
             "dt_factor": None if c.dt is not None else c.dt_factor,
             "drag_law": c.drag_law,
-            "vdw_profile": c.contact.vdw_profile,
+            "sliding": c.sliding,
+            "coarse_delta": c.coarse_delta,
+            "fine_length": c.fine_length,
             "contact_mode": c.contact.mode,
             "seed": self.seed,
             "initial_radius": c.initial_radius,
@@ -224,7 +225,10 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
     if ignored:
         flags = ", ".join(_FLAGS[k] for k in ignored)
         _warn(f"SI values given, so {flags} {'is' if len(ignored) == 1 else 'are'} ignored")
-    check_substrate_supported(params, args.substrate)
+    try:
+        params = apply_substrate(params, args.substrate)
+    except units.ParameterError as exc:
+        raise _invalid(exc) from exc
 
     deposit = DEFAULT_DEPOSIT[args.preset] if args.deposit is None else args.deposit
     if not (math.isfinite(deposit) and deposit > 0.0):
@@ -236,11 +240,15 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
     from cnt_env.deposition import ContactOptions, DepositionConfig
 
     try:
-        contact = ContactOptions(mode=args.contact_mode, vdw_profile=args.vdw_profile)
-        optional = {} if args.initial_radius is None else {"initial_radius": args.initial_radius}
+        contact = ContactOptions(mode=args.contact_mode)
+        radius = args.initial_radius
+        if radius is None:
+            radius = DEFAULT_INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         sim_config = DepositionConfig(
-            params=params, dt=args.dt, drag_law=args.drag_law, contact=contact, **optional
-        )
+            params=params, dt=args.dt, drag_law=args.drag_law, contact=contact,
+            initial_radius=radius, sliding=args.sliding, coarse_delta=args.coarse_delta,
+            fine_length=args.fine_length,
+        )  # fmt: skip
     except ValueError as exc:
         raise _invalid(exc) from exc
     return RunSpec(
@@ -386,7 +394,7 @@ def format_summary(result: Mapping[str, Any], written: Sequence[Path] = ()) -> s
         f"{c.get('substrate', 'flat')} substrate",
         f"  Hbar={_fmt(p['Hbar'])} Ibar={_fmt(p['Ibar'])} vbar={_fmt(p['vbar'])} "
         f"phi={_fmt(p['phi'])} delta_bar={_fmt(p['delta_bar'])} dt={_fmt(c.get('dt'))} "
-        f"drag={c.get('drag_law')} vdw={c.get('vdw_profile')} contact={c.get('contact_mode')}",
+        f"drag={c.get('drag_law')} contact={c.get('contact_mode')} sliding={c.get('sliding')}",
         f"deposited {_fmt(result['deposited_length'], '.1f')} L_vb in {result['steps']} steps "
         f"({result['newton_iterations']} Newton iterations), "
         f"t = {_fmt(result['sim_time'])} tau, wall {_fmt(result['wall_time_s'], '.1f')} s",
@@ -574,8 +582,8 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--substrate",
         choices=("flat", "stepped"),
-        default="flat",
-        help="flat sticky (default) or stepped (not implemented yet)",
+        default=None,
+        help="flat sticky or stepped (default: the preset's)",
     )
 
     g = run.add_argument_group("dimensionless groups (override the preset; lengths in L_vb)")
@@ -617,13 +625,30 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
     m = run.add_argument_group("model and solver options")
     m.add_argument("--seed", type=int, default=0, help="seed of the start-up noise (default 0)")
     m.add_argument("--drag-law", choices=DRAG_LAWS, default="linear")
-    m.add_argument("--vdw-profile", choices=VDW_PROFILES, default="linear")
+    m.add_argument(
+        "--sliding",
+        choices=SLIDING_OPTIONS,
+        default="B",
+        help="stepped substrate: B fixed in x, C free in x until snapped",
+    )
+    m.add_argument(
+        "--coarse-delta",
+        type=float,
+        default=None,
+        help="graded mesh: inject edges of this length, split near the contact",
+    )
+    m.add_argument(
+        "--fine-length",
+        type=float,
+        default=20.0,
+        help="graded mesh: arc length above the contact kept at --delta",
+    )
     m.add_argument("--contact-mode", choices=CONTACT_MODES, default="event")
     m.add_argument(
         "--initial-radius",
         type=float,
         metavar="R",
-        help="radius of the start-up contact arc, L_vb (default: DepositionConfig's)",
+        help="radius of the start-up contact arc, L_vb (default: 6.4 flat, 3.9 stepped)",
     )
     m.add_argument(
         "--transient",

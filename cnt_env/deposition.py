@@ -29,13 +29,10 @@ from .forces import (
     VDW_DELTA,
     VDW_ENERGY,
     VDW_NODE,
-    VDW_PROFILE,
-    VDW_KB,
-    VDW_PROFILES,
     vdw_pull,
 )
 from .rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
-from .substrate import FlatSticky, Substrate
+from .substrate import FlatSticky, Stepped, Substrate
 from .units import DimensionlessParams
 
 CONTACT_MODES = ("project", "event")
@@ -51,10 +48,8 @@ class ContactOptions:
       step, as in the paper's description.
     * ``beta0_min``: a new contact edge flatter than this (rad) deposits at once.
     * ``sqrt_clamp``: sqrt(delta^2 - y_c^2) is clamped below at this times delta.
-    * ``vdw_profile``: ``"linear"`` (paper eq. 1), ``"quadratic"`` or ``"moment"``
-      (forces.vdw_pull).
     * A contact node is deposited once y_c <= ``event_tol * delta * sin(beta0)`` (the
-      vdW energy it still holds is then below 2% (linear) or 1e-4 (quadratic) of e_v delta).
+      vdW energy it still holds is then below 1% of e_v delta).
     """
 
     mode: str = "event"
@@ -62,11 +57,8 @@ class ContactOptions:
     sqrt_clamp: float = 0.05
     event_tol: float = 0.01
     max_event_iterations: int = 8
-    vdw_profile: str = "linear"
 
     def __post_init__(self) -> None:
-        if self.vdw_profile not in VDW_PROFILES:
-            raise ValueError(f"vdw_profile must be one of {list(VDW_PROFILES)}")
         if self.mode not in CONTACT_MODES:
             raise ValueError(f"contact mode must be one of {CONTACT_MODES}, got {self.mode!r}")
         for name in ("beta0_min", "sqrt_clamp", "event_tol"):
@@ -79,7 +71,10 @@ class ContactOptions:
 class DepositionConfig:
     """Everything that defines a deposition run, in dimensionless units.
 
-    ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py).
+    ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and
+    sticky when ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B" or
+    "C") and ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
+    serpentine preset) apply to the stepped one (substrate.py).
 
     Graded discretisation [choice, physics.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
@@ -100,6 +95,8 @@ class DepositionConfig:
     coarse_delta: float | None = None
     fine_length: float = 20.0
     drag_law: str = "linear"
+    sliding: str = "B"
+    tail_length: float = 195.0
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
 
@@ -116,6 +113,10 @@ class DepositionConfig:
             )
         if self.initial_radius >= p.Hbar:
             raise ValueError("initial_radius must be below Hbar")
+        if self.sliding not in ("B", "C"):
+            raise ValueError(f"sliding must be 'B' or 'C', got {self.sliding!r}")
+        if not (self.tail_length > 4 * p.delta_bar):
+            raise ValueError(f"tail_length must exceed 4 delta_bar, got {self.tail_length!r}")
         if self.coarse_delta is not None and not (
             math.isfinite(self.coarse_delta)
             and self.coarse_delta >= p.delta_bar
@@ -150,7 +151,13 @@ class DepositionSim:
     def __init__(self, config: DepositionConfig, seed: int | None = 0) -> None:
         self.config = config
         self.params = p = config.params
-        self.substrate: Substrate = FlatSticky()
+        self.substrate: Substrate = (
+            FlatSticky()
+            if p.kappa_c_bar is None
+            else Stepped(
+                kappa_c=p.kappa_c_bar, sliding=config.sliding, tail_length=config.tail_length
+            )
+        )
         self.delta = p.delta_bar
         self.dt = config.time_step
         material = RodMaterial(
@@ -172,8 +179,9 @@ class DepositionSim:
         self.rod.vdw[VDW_DELTA] = self.delta
         self.rod.vdw[VDW_CLAMP] = config.contact.sqrt_clamp
         self.rod.vdw[VDW_ENERGY] = p.vdw_energy
-        self.rod.vdw[VDW_PROFILE] = VDW_PROFILES[config.contact.vdw_profile]
         self.n_deposited = 0
+        self.snapped = np.zeros(self.rod.max_nodes, dtype=bool)  # per rod edge (stepped)
+        self.snaps = 0
         self._deposited_length = -self.delta  # node 0 -> 1 is the initial clamp, not laid
         self._trace = np.zeros((1024, 3))
         self._n_archived = 0
@@ -184,6 +192,7 @@ class DepositionSim:
         self.immediate_deposits = 0
         for i in range(n_dep):
             self._deposit(i)
+        self.rod.fix_node(0)  # the oldest node on the substrate is the clamp (any substrate)
         self.beta0 = 0.0  # not armed yet
         self._settle_contact()
 
@@ -272,14 +281,27 @@ class DepositionSim:
             j += 1
 
     def _delete(self) -> None:
-        """Archive and drop deposited nodes the solve no longer needs."""
-        extra = self.n_deposited - self.substrate.keep_deposited
+        """Archive and drop deposited nodes the solve no longer needs: on the sticky
+        substrate all but the last ``keep_deposited``; on the stepped one those more than
+        ``tail_length`` of arc behind the contact node. The oldest kept node is clamped."""
+        rod = self.rod
+        if self.substrate.tail_length == math.inf:
+            extra = self.n_deposited - self.substrate.keep_deposited
+        else:
+            behind = np.cumsum(rod.rest_lengths[: self.n_deposited][::-1])[::-1]
+            extra = int(np.count_nonzero(behind > self.substrate.tail_length))
+            extra = min(extra, self.n_deposited - 2)
         if extra <= 0:
             return
-        self._archive(self.rod.nodes[:extra])
-        self.rod.drop_front(extra)
+        self._archive(rod.nodes[:extra])
+        rod.drop_front(extra)
         self.n_deposited -= extra
-        self.rod.vdw[VDW_NODE] = self.contact_node
+        keep = len(self.snapped) - extra
+        self.snapped[:keep] = self.snapped[extra:].copy()
+        self.snapped[keep:] = False
+        rod.fixed[0:3] = 1  # the oldest retained node stays clamped
+        rod.u[0:3] = 0.0
+        rod.vdw[VDW_NODE] = self.contact_node
 
     def _archive(self, points: np.ndarray) -> None:
         n = self._n_archived
@@ -344,7 +366,11 @@ class DepositionSim:
         # vdW work over the step (trapezoid in y): the energy the adhesion released
         self.vdw_work += 0.5 * (f_before + self._vdw_force(y_after)) * (y_after - y_before)
         self.time = rod.time
-        self.substrate.after_step(rod, self.n_deposited)
+        if len(self.snapped) < rod.max_nodes:
+            self.snapped = np.concatenate(
+                [self.snapped, np.zeros(rod.max_nodes - len(self.snapped), dtype=bool)]
+            )
+        self.snaps += self.substrate.after_step(rod, self.n_deposited, self.snapped)
         self._settle_contact()
         self._inject()
         self._refine()
@@ -360,8 +386,7 @@ class DepositionSim:
     def _vdw_force(self, y: float) -> float:
         """F_y on the contact node at height y (forces.vdw_pull, as in the solve)."""
         v = self.rod.vdw
-        return vdw_pull(y, v[VDW_BETA0], v[VDW_DELTA], v[VDW_CLAMP], v[VDW_ENERGY],
-                        int(v[VDW_PROFILE]), v[VDW_KB])[0]  # fmt: skip
+        return vdw_pull(y, v[VDW_BETA0], v[VDW_DELTA], v[VDW_CLAMP], v[VDW_ENERGY])[0]
 
     def advance(self, duration: float) -> None:
         """Advance by ``duration`` with the configured dt (the last step is shortened)."""
@@ -416,14 +441,15 @@ class DepositionSim:
             "halvings": r.halvings, "events": self.events,
             "immediate_deposits": self.immediate_deposits, "n_nodes": r.n_nodes,
             "deposited_length": self.deposited_length, "vdw_work": self.vdw_work,
-            "sticking_loss": self.sticking_loss,
+            "sticking_loss": self.sticking_loss, "snaps": self.snaps,
         }  # fmt: skip
 
     # ---- exact snapshot and restore ---------------------------------------------------
     def snapshot(self) -> dict:
         return {
             "rod": self.rod.snapshot(), "n_deposited": self.n_deposited, "beta0": self.beta0,
-            "deposited_length": self._deposited_length,
+            "deposited_length": self._deposited_length, "snapped": self.snapped.copy(),
+            "snaps": self.snaps,
             "trace": self._trace[: self._n_archived].copy(), "time": self.time,
             "vdw_work": self.vdw_work, "events": self.events, "sticking_loss": self.sticking_loss,
             "immediate_deposits": self.immediate_deposits,
@@ -434,6 +460,8 @@ class DepositionSim:
         self.n_deposited = snap["n_deposited"]
         self.beta0 = snap["beta0"]
         self._deposited_length = snap["deposited_length"]
+        self.snapped = snap["snapped"].copy()
+        self.snaps = snap["snaps"]
         self._trace = np.zeros((max(1024, 2 * len(snap["trace"])), 3))
         self._n_archived = 0
         self._archive(snap["trace"])

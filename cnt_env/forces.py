@@ -103,56 +103,31 @@ def add_linear_drag(
                 ab[_DIAG + k - m, b + m] -= dfb
 
 
-VDW_LINEAR = 0  # paper eq. 1: E_v linear in beta
-VDW_QUADRATIC = 1  # E_v quadratic in beta: reversible quasi-static release
-VDW_MOMENT = 2  # constant contact moment sqrt(2 k_b e_v), the continuum adhesion moment
-VDW_PROFILES = {"linear": VDW_LINEAR, "quadratic": VDW_QUADRATIC, "moment": VDW_MOMENT}
-
 # layout of the vdW parameter vector the stepper carries (Rod.vdw)
-VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY, VDW_PROFILE, VDW_KB = range(7)
+VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY = range(5)
 
 
 @njit(cache=True)
-def vdw_pull(
-    y: float, beta0: float, delta: float, clamp: float, e_v: float, profile: int, k_b: float
-) -> tuple[float, float]:
-    """Vertical vdW force F_y on the contact node at height y, and dF_y/dy.
+def vdw_pull(y: float, beta0: float, delta: float, clamp: float, e_v: float) -> tuple[float, float]:
+    """Vertical vdW force F_y on the contact node at height y, and dF_y/dy (paper eq. 1).
 
-    beta is the contact edge's angle, sin(beta) = y / delta; the energy of the contact
-    edge releases e_v delta as beta goes from beta0 to 0:
-
-    * linear (paper eq. 1): E_v = (e_v delta / beta0)(beta - beta0),
-      F_y = -(e_v delta / beta0) / sqrt(delta^2 - y^2). The torque is constant while the
-      bending resistance falls to zero, so in a quasi-static lay-down half of e_v delta is
-      released as a snap; the contact curvature it sustains tends to 1/L_vb.
-    * quadratic: E_v = e_v delta (beta^2 / beta0^2 - 1), F_y = -2 e_v delta beta /
-      (beta0^2 sqrt(delta^2 - y^2)). The torque falls linearly with beta like the bending
-      resistance, so the release is reversible and the contact curvature tends to the
-      continuum adhesion value sqrt(2 e_v / k_b) = sqrt(2) / L_vb. It stalls, though: the
-      pull vanishes as beta -> 0 while the curvature of the rod above still resists.
-    * moment: E_v = M_c beta with the continuum contact moment M_c = k_b kappa_c =
-      sqrt(2 k_b e_v), whatever beta0. It releases M_c beta0 per node, which is e_v delta
-      exactly when beta0 is the chord angle kappa_c delta / 2 of the continuum contact
-      curvature; the simulator's vdW-work diagnostic measures how close the dynamics get.
-
+    beta is the contact edge's angle, sin(beta) = y / delta, and
+    E_v = (e_v delta / beta0)(beta - beta0): the edge releases e_v delta as beta goes from
+    beta0 (its angle when node c-1 touched down) to 0, with the constant torque
+    e_v delta / beta0, so F_y = -(e_v delta / beta0) / sqrt(delta^2 - y^2).
     sqrt(delta^2 - y^2) is clamped from below at ``clamp * delta`` (there dF/dy = 0).
+
+    (Two other profiles were tried and dropped, see benchmarks/RESULTS.md: a quadratic
+    E_v ~ beta^2 stalls, since its pull vanishes as beta -> 0 while the rod above still
+    resists; a constant continuum moment sqrt(2 k_b e_v) releases 1.1-1.5 e_v per length.)
     """
+    c = e_v * delta / beta0
     root_sq = delta * delta - y * y
     floor = clamp * delta
     if root_sq <= floor * floor:
-        beta = math.copysign(math.acos(clamp), y)
-        if profile == VDW_LINEAR:
-            return -e_v * delta / (beta0 * floor), 0.0
-        if profile == VDW_MOMENT:
-            return -math.sqrt(2.0 * k_b * e_v) / floor, 0.0
-        return -2.0 * e_v * delta * beta / (beta0 * beta0 * floor), 0.0
+        return -c / floor, 0.0
     root = math.sqrt(root_sq)
-    if profile == VDW_LINEAR or profile == VDW_MOMENT:
-        c = e_v * delta / beta0 if profile == VDW_LINEAR else math.sqrt(2.0 * k_b * e_v)
-        return -c / root, -c * y / (root * root_sq)
-    beta = math.asin(y / delta)
-    c = 2.0 * e_v * delta / (beta0 * beta0)
-    return -c * beta / root, -c * (1.0 / root_sq + beta * y / (root * root_sq))
+    return -c / root, -c * y / (root * root_sq)
 
 
 @njit(cache=True)
@@ -163,8 +138,7 @@ def add_vdw(q: np.ndarray, vdw: np.ndarray, force: np.ndarray, ab: np.ndarray) -
     if node < 0:
         return
     k = 4 * node + 1  # y DOF of node c
-    f, dfdy = vdw_pull(q[k], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP],
-                       vdw[VDW_ENERGY], int(vdw[VDW_PROFILE]), vdw[VDW_KB])  # fmt: skip
+    f, dfdy = vdw_pull(q[k], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
     force[k] += f
     ab[_DIAG, k] -= dfdy
 

@@ -1,15 +1,21 @@
 """Substrates: what happens to a node once it is deposited (physics.md §5).
 
-A substrate decides which DOFs of a deposited node stay free, how many deposited nodes
-must stay in the solve, and whether deposited edges reorient after a step. The simulator
-(``deposition.py``) calls these hooks; the substrate owns no state of the rod.
+A substrate decides which DOFs of a deposited node stay free, which deposited nodes stay
+in the solve, and whether deposited edges reorient after a step. The simulator
+(``deposition.py``) calls these hooks; per-edge substrate state (``snapped``) is an array
+the simulator owns and shifts with the rod, indexed like the rod's edges.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .rod.stepper import Rod
+
+SLIDING_OPTIONS = ("B", "C")
 
 
 @dataclass(frozen=True)
@@ -23,6 +29,7 @@ class FlatSticky:
 
     name: str = "flat"
     keep_deposited: int = 2
+    tail_length: float = math.inf
 
     def deposit(self, rod: Rod, node: int) -> None:
         """Project node onto y = 0, stop it, and fix all three coordinates."""
@@ -31,8 +38,73 @@ class FlatSticky:
         rod.u[i : i + 3] = 0.0
         rod.fixed[i : i + 3] = 1
 
-    def after_step(self, rod: Rod, n_deposited: int) -> None:
-        """Nothing moves on a sticky substrate."""
+    def after_step(self, rod: Rod, n_deposited: int, snapped: np.ndarray) -> int:
+        """Nothing moves on a sticky substrate. Returns the number of edges snapped (0)."""
+        return 0
 
 
-Substrate = FlatSticky  # the stepped substrate joins this union in the serpentine issue
+@dataclass(frozen=True)
+class Stepped:
+    """Substrate with steps along z (serpentines), physics.md §5.
+
+    A deposited node keeps y = 0 and slides along the steps (z). A deposited edge e
+    snaps into the steps when |e.x| < kappa_c delta |e.z| (the small-angle form of
+    2 tan(psi/2) < kappa_c delta, psi the angle between e and z): it is turned along z
+    keeping its length, by moving its newer node (edges are processed oldest first, so
+    a chain of snapped edges stays aligned). ``sliding`` [choice]:
+
+    * ``"B"``: deposited nodes are fixed in x from touchdown and free in z;
+    * ``"C"``: deposited nodes are free in x and z until their edge snaps, then fixed
+      in x.
+
+    Deposited nodes stay in the solve (they slide, and drag acts on them) up to
+    ``tail_length`` of arc behind the contact; the oldest retained node is clamped.
+    """
+
+    kappa_c: float
+    sliding: str = "B"
+    tail_length: float = 195.0
+    name: str = "stepped"
+    keep_deposited: int = 0  # not used: the tail is kept by arc length
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.kappa_c) and self.kappa_c > 0):
+            raise ValueError(f"kappa_c must be finite and > 0, got {self.kappa_c!r}")
+        if self.sliding not in SLIDING_OPTIONS:
+            raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
+        if not (self.tail_length > 0):
+            raise ValueError(f"tail_length must be > 0, got {self.tail_length!r}")
+
+    def deposit(self, rod: Rod, node: int) -> None:
+        i = 4 * node
+        rod.q[i + 1] = 0.0
+        rod.u[i + 1] = 0.0
+        rod.fixed[i + 1] = 1
+        if self.sliding == "B":
+            rod.u[i] = 0.0
+            rod.fixed[i] = 1
+
+    def after_step(self, rod: Rod, n_deposited: int, snapped: np.ndarray) -> int:
+        """Apply the critical-curvature rule to every deposited edge not yet snapped."""
+        q = rod.q
+        count = 0
+        for j in range(n_deposited - 1):
+            if snapped[j]:
+                continue
+            a, b = 4 * j, 4 * (j + 1)
+            ex = q[b] - q[a]
+            ez = q[b + 2] - q[a + 2]
+            if abs(ex) < self.kappa_c * rod.rest_lengths[j] * abs(ez):
+                length = math.hypot(ex, ez)
+                q[b] = q[a]
+                q[b + 2] = q[a + 2] + math.copysign(length, ez)
+                rod.u[b] = 0.0
+                for node in (j, j + 1):  # aligned with the steps: x is locked
+                    rod.fixed[4 * node] = 1
+                    rod.u[4 * node] = 0.0
+                snapped[j] = True
+                count += 1
+        return count
+
+
+Substrate = FlatSticky | Stepped

@@ -39,7 +39,7 @@ RUN_KEYS = {
     "config",
     "version",
 }
-CONFIG_KEYS = {"dt", "drag_law", "vdw_profile", "contact_mode", "seed", "initial_radius"}
+CONFIG_KEYS = {"dt", "drag_law", "sliding", "contact_mode", "seed", "initial_radius"}
 TINY = ["--deposit", "5", "--Hbar", "40", "--transient", "0"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -177,13 +177,14 @@ def test_unphysical_input_is_rejected_before_any_work(
     assert not out.exists()
 
 
-@pytest.mark.parametrize(
-    "args", [["--substrate", "stepped"], ["--preset", "serpentine"], ["--kappa-c", "0.2"]]
-)
-def test_stepped_substrate_is_not_there_yet(args: list[str], no_simulation: None) -> None:
-    code, stdout, stderr = _call(["run", *args])
-    assert code == 2 and stdout == ""
-    assert cli.STEPPED_NOT_READY in stderr
+def test_substrate_flag_overrides_the_preset() -> None:
+    flat = cli.apply_substrate(units.paper_groups("serpentine"), "flat")
+    assert flat.kappa_c_bar is None and flat.Hbar == 155.0
+    stepped = cli.apply_substrate(units.paper_groups("coil"), "stepped")
+    assert stepped.kappa_c_bar == cli.DEFAULT_KAPPA_C
+    kept = cli.apply_substrate(units.paper_groups("serpentine", kappa_c_bar=0.5), "stepped")
+    assert kept.kappa_c_bar == 0.5
+    assert cli.apply_substrate(units.paper_groups("coil"), None).kappa_c_bar is None
 
 
 def test_si_values_win_over_groups() -> None:

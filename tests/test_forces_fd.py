@@ -5,14 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnt_env.forces import (
-    VDW_LINEAR,
-    VDW_MOMENT,
-    VDW_QUADRATIC,
-    add_linear_drag,
-    add_printed_drag,
-    add_vdw,
-)
+from cnt_env.forces import add_linear_drag, add_printed_drag, add_vdw
 from cnt_env.rod.banded import KL, KU, LDAB
 from tests.rodkit import random_rod
 
@@ -89,11 +82,10 @@ def test_printed_law_matches_linear_for_axial_and_normal_motion() -> None:
         np.testing.assert_allclose(f_pr, f_lin, rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.parametrize("profile", [VDW_LINEAR, VDW_QUADRATIC, VDW_MOMENT])
 @pytest.mark.parametrize("y", [0.9, 0.3, 0.01, -0.2, 0.999])
-def test_vdw_force_and_jacobian(y: float, profile: int) -> None:
+def test_vdw_force_and_jacobian(y: float) -> None:
     delta, beta0, clamp, e_v = 1.0, 0.4, 0.05, 1.3
-    vdw = np.array([2.0, beta0, delta, clamp, e_v, float(profile), 0.8])
+    vdw = np.array([2.0, beta0, delta, clamp, e_v])
 
     def fy(yy: float) -> tuple[float, float]:
         q = np.zeros(11)
@@ -105,25 +97,17 @@ def test_vdw_force_and_jacobian(y: float, profile: int) -> None:
 
     f, dfdy_res = fy(y)
     root = max(np.sqrt(delta**2 - y * y), clamp * delta)
-    beta = np.arcsin(y / delta) if y < 0.99 else np.arccos(clamp)
-    if profile == VDW_LINEAR:
-        expected = -e_v * delta / beta0 / root
-    elif profile == VDW_MOMENT:
-        expected = -np.sqrt(2 * 0.8 * e_v) / root
-    else:
-        expected = -2 * e_v * delta * beta / beta0**2 / root
-    assert f == pytest.approx(expected, rel=1e-12)
+    assert f == pytest.approx(-e_v * delta / beta0 / root, rel=1e-12)
     fd = (fy(y + 1e-7)[0] - fy(y - 1e-7)[0]) / 2e-7
     assert dfdy_res == pytest.approx(-fd, rel=1e-6, abs=1e-9)
 
 
-@pytest.mark.parametrize("profile", [VDW_LINEAR, VDW_QUADRATIC])
-def test_vdw_releases_ev_delta_from_beta0_to_zero(profile: int) -> None:
+def test_vdw_releases_ev_delta_from_beta0_to_zero() -> None:
     """Integrated from beta0 down to 0 the pull releases exactly e_v delta (paper eq. 1)."""
     from scipy.integrate import quad
 
     delta, beta0, e_v = 0.8, 0.6, 1.7
-    vdw = np.array([0.0, beta0, delta, 0.05, e_v, float(profile), 1.0])
+    vdw = np.array([0.0, beta0, delta, 0.05, e_v])
 
     def pull(y: float) -> float:
         q = np.array([0.0, y, 0.0])

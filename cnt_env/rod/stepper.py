@@ -357,7 +357,7 @@ class Rod:
         self._allocate(cap)
         self.flow = np.zeros(3)
         # vdW contact, laid out as forces.VDW_*: node -1 means no contact force
-        self.vdw = np.array([-1.0, 1.0, 1.0, 0.05, 1.0, 0.0, material.k_b])
+        self.vdw = np.array([-1.0, 1.0, 1.0, 0.05, 1.0])
         self.time = 0.0
         self.steps = 0
         self.newton_iterations = 0
