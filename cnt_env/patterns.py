@@ -18,10 +18,15 @@ Conventions (fixed here, used everywhere):
   The *relative spread* is ``(p84 - p16) / (2 median)``.
 * **Coefficient of variation** (CV) is the sample standard deviation
   (``ddof=1``) over the mean.
-* **Amplitude** is the z distance between the extreme points of two successive,
-  opposite U-turns (peak-to-peak). A serpentine with straight runs of length
-  ``A`` along z, joined by semicircles of diameter ``lambda / 2``, has amplitude
-  ``A + lambda / 2``.
+* **Amplitude** is half the z distance between the extreme points of two
+  successive, opposite U-turns, i.e. the conventional amplitude (a sine
+  ``A sin(.)`` has amplitude ``A``); the full distance is reported as
+  ``peak_to_peak``. A serpentine with straight runs of length ``L`` along z,
+  joined by semicircles of diameter ``lambda / 2``, has peak-to-peak
+  ``L + lambda / 2``. [Choice] physics.md §7 words the amplitude as "the z
+  distance between successive opposite U-turns"; read literally that is the
+  peak-to-peak value, which on our serpentine baseline is twice the paper's
+  Abar ~ 30, while the conventional half matches it (benchmarks/RESULTS.md).
 * **Wavelength** is the distance, projected on the direction of progression,
   between two successive U-turns on the same side (absolute value). A U-turn's
   position here is its *centre*: the midpoint of the two points where the trace
@@ -574,9 +579,19 @@ def uturns(trace: ArrayLike, options: MeasureOptions | None = None) -> dict[str,
     return out
 
 
-def _direction(m: _Measured, flow_direction: ArrayLike | None) -> FloatArray | None:
+def _direction(
+    m: _Measured, flow_direction: ArrayLike | None, u: dict[str, Any] | None = None
+) -> FloatArray | None:
     if flow_direction is None:
+        # progression of same-side U-turn centres (the trace's end points fall anywhere
+        # along a run, which would tilt an end-to-end estimate), else end to end
         d = m.points[-1] - m.points[0]
+        if u is not None:
+            for s in (1, -1):
+                c = u["centres"][u["sides"] == s]
+                if len(c) >= 2:
+                    d = c[-1] - c[0]
+                    break
     else:
         try:
             d = np.asarray(flow_direction, dtype=np.float64).reshape(-1)
@@ -596,8 +611,9 @@ def _serpentine(
     m: _Measured, u: dict[str, Any], flow_direction: ArrayLike | None
 ) -> dict[str, Any]:
     idx, side = u["local_indices"], u["sides"]
-    amplitudes = np.abs(np.diff(m.points[idx, 1]))
-    direction = _direction(m, flow_direction)
+    peak_to_peak = np.abs(np.diff(m.points[idx, 1]))
+    amplitudes = 0.5 * peak_to_peak
+    direction = _direction(m, flow_direction, u)
     if direction is None:
         wavelengths = np.empty(0)
     else:
@@ -607,6 +623,7 @@ def _serpentine(
         )
     return {
         "amplitude": _median(amplitudes),
+        "peak_to_peak": _median(peak_to_peak),
         "amplitude_spread": _spread(amplitudes),
         "amplitude_cv": _cv(amplitudes),
         "wavelength": _median(wavelengths),
@@ -627,7 +644,8 @@ def serpentine_measures(
 ) -> dict[str, Any]:
     """Serpentine amplitude and wavelength from the U-turns (physics.md §7).
 
-    Amplitude: median |dz| between successive (opposite) U-turns. Wavelength:
+    Amplitude: median |dz| / 2 between successive (opposite) U-turns (``peak_to_peak``
+    is the median |dz|). Wavelength:
     median |distance along the direction of progression| between successive
     same-side U-turns, both sides pooled. The direction of progression is
     ``flow_direction`` as (x, z), or, if None, the mean displacement of the
@@ -906,6 +924,7 @@ def measure(
         "coil_n_rejected": int(coil["n_rejected"]),
         "coil_coverage": float(coil["coverage"]),
         "amplitude": float(serp["amplitude"]),
+        "peak_to_peak": float(serp["peak_to_peak"]),
         "amplitude_spread": [float(v) for v in serp["amplitude_spread"]],
         "amplitude_cv": float(serp["amplitude_cv"]),
         "wavelength": float(serp["wavelength"]),

@@ -63,6 +63,9 @@ class Stepped:
 
     kappa_c: float
     sliding: str = "B"
+    # a snap that would turn an edge by more than this against a neighbour is skipped:
+    # it would fold the trace into a hairpin (a pi turn, where the curvature is singular)
+    max_snap_turn: float = math.radians(150.0)
     tail_length: float = 195.0
     name: str = "stepped"
     keep_deposited: int = 0  # not used: the tail is kept by arc length
@@ -95,6 +98,8 @@ class Stepped:
             ex = q[b] - q[a]
             ez = q[b + 2] - q[a + 2]
             if abs(ex) < self.kappa_c * rod.rest_lengths[j] * abs(ez):
+                if self._would_fold(q, j, math.copysign(1.0, ez), rod.n_nodes):
+                    continue
                 length = math.hypot(ex, ez)
                 q[b] = q[a]
                 q[b + 2] = q[a + 2] + math.copysign(length, ez)
@@ -105,6 +110,18 @@ class Stepped:
                 snapped[j] = True
                 count += 1
         return count
+
+    def _would_fold(self, q: np.ndarray, j: int, sz: float, n_nodes: int) -> bool:
+        """Does edge j, turned to (0, 0, sz), make a turn > max_snap_turn with a neighbour?"""
+        limit = math.cos(self.max_snap_turn)
+        for k in (j - 1, j + 1):
+            if not 0 <= k < n_nodes - 1:
+                continue
+            a, b = 4 * k, 4 * (k + 1)
+            e = q[b : b + 3] - q[a : a + 3]
+            if sz * e[2] / np.linalg.norm(e) < limit:
+                return True
+        return False
 
 
 Substrate = FlatSticky | Stepped

@@ -27,7 +27,7 @@ from cnt_env.patterns import (
 # Tolerances, in one place.
 COIL_RADIUS_REL = 0.01  # coil radius vs the construction
 SERPENTINE_REL = 0.02  # amplitude and wavelength vs the construction
-EXACT_AMPLITUDE_REL = 2e-3  # amplitude vs run + lambda/2 (apex sampled within spacing/2)
+EXACT_AMPLITUDE_REL = 2e-3  # peak-to-peak vs run + lambda/2 (apex within spacing/2)
 FIT_EXACT = 1e-9  # circle fit of points exactly on a circle
 
 R0_BAR = 7.64  # the paper's coil radius (physics.md §6)
@@ -110,7 +110,7 @@ def serpentine_curve(
 
 def serpentine_trace(
     n_runs: int = 44,
-    run: float = A_BAR - LAMBDA_BAR / 2,
+    run: float = 2 * A_BAR - LAMBDA_BAR / 2,
     wavelength: float = LAMBDA_BAR,
     spacing: float = 0.5,
     noise: float = 0.01,
@@ -238,10 +238,12 @@ def test_periodic_serpentine_amplitude_wavelength_class() -> None:
 
 @pytest.mark.parametrize(("run", "wavelength"), [(30.0, 7.0), (20.0, 4.0), (40.0, 12.0)])
 def test_amplitude_is_extreme_to_extreme(run: float, wavelength: float) -> None:
-    """Runs of length A joined by semicircles of diameter lambda/2: amplitude A + lambda/2."""
+    """Runs of length L joined by semicircles of diameter lambda/2: peak-to-peak
+    L + lambda/2, amplitude half of it."""
     trace = serpentine_trace(run=run, wavelength=wavelength, noise=0.0)
     serp = serpentine_measures(trace)
-    assert serp["amplitude"] == pytest.approx(run + wavelength / 2, rel=EXACT_AMPLITUDE_REL)
+    assert serp["peak_to_peak"] == pytest.approx(run + wavelength / 2, rel=EXACT_AMPLITUDE_REL)
+    assert serp["amplitude"] == pytest.approx(serp["peak_to_peak"] / 2, rel=1e-12)
     assert serp["wavelength"] == pytest.approx(wavelength, rel=EXACT_AMPLITUDE_REL)
 
 
@@ -252,7 +254,7 @@ def test_uturns_alternate_and_index_the_input() -> None:
     assert np.all(sides[1:] != sides[:-1])
     np.testing.assert_array_equal(trace[u["indices"]], u["positions"])
     z = trace[u["indices"], 1]
-    top = A_BAR - LAMBDA_BAR / 2 + LAMBDA_BAR / 4
+    top = 2 * A_BAR - LAMBDA_BAR / 2 + LAMBDA_BAR / 4
     np.testing.assert_allclose(z[sides > 0], top, atol=0.05)
     np.testing.assert_allclose(z[sides < 0], -LAMBDA_BAR / 4, atol=0.05)
     # the transient (200 L_vb) is before the first U-turn index
@@ -261,7 +263,7 @@ def test_uturns_alternate_and_index_the_input() -> None:
 
 def test_irregular_serpentine() -> None:
     rng = np.random.default_rng(2)
-    runs = list(A_BAR - LAMBDA_BAR / 2 + 8.0 * rng.standard_normal(44))
+    runs = list(2 * A_BAR - LAMBDA_BAR / 2 + 8.0 * rng.standard_normal(44))
     trace = serpentine_curve(runs, LAMBDA_BAR, 0.5)
     serp = serpentine_measures(trace)
     assert serp["amplitude_cv"] > 0.1
@@ -299,7 +301,7 @@ def test_wide_loops_are_caught_by_crossings() -> None:
 
 def test_prominence_threshold() -> None:
     trace = serpentine_trace()
-    assert len(uturns(trace, MeasureOptions(uturn_prominence=40.0))["indices"]) == 0
+    assert len(uturns(trace, MeasureOptions(uturn_prominence=70.0))["indices"]) == 0
     assert len(uturns(trace, MeasureOptions(uturn_prominence=20.0))["indices"]) > 20
 
 

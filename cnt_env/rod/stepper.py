@@ -595,19 +595,10 @@ class Rod:
         # explicit predictor for free DOFs (fixed DOFs keep their prescribed values)
         free = self.fixed[:nd] == 0
         self.q[:nd][free] += dt * self.u[:nd][free]
-        m, d, o = self.material, self.drag, self.options
-        status = newton_solve(
-            self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
-            self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
-            self.tangents_old, self.d1_old, self.ref_twist_old,
-            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
-            o.residual_tol * o.force_scale,
-            o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
-            o.max_iter,
-            self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
-            self._kb, self._kappa, self._twist, self._ref_twist,
-            self._force, self._ab, self._ipiv, self._rhs, self._stats,
-        )  # fmt: skip
+        try:
+            status = self._newton(n, dt)
+        except ZeroDivisionError:  # numba's error model: a degenerate edge (zero length)
+            status = NON_FINITE
         self.newton_iterations += int(self._stats[0])
         if status != CONVERGED:
             self.q[:nd] = self._q_old[:nd]
@@ -621,6 +612,22 @@ class Rod:
         self.time += dt
         self.steps += 1
         return CONVERGED
+
+    def _newton(self, n: int, dt: float) -> int:
+        m, d, o = self.material, self.drag, self.options
+        self._stats[:] = 0.0
+        return newton_solve(
+            self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
+            self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
+            self.tangents_old, self.d1_old, self.ref_twist_old,
+            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
+            o.residual_tol * o.force_scale,
+            o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
+            o.max_iter,
+            self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
+            self._kb, self._kappa, self._twist, self._ref_twist,
+            self._force, self._ab, self._ipiv, self._rhs, self._stats,
+        )  # fmt: skip
 
     def step(self, dt: float) -> None:
         """Advance by exactly ``dt``; a failed step is retried as two halves, recursively.
