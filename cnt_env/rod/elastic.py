@@ -27,7 +27,6 @@ import numpy as np
 from numba import njit
 
 from .banded import KL, KU
-from .frames import cross3, dot3
 
 _DIAG = KL + KU  # row of the main diagonal in band storage
 
@@ -123,13 +122,28 @@ def add_stretch(
 
 
 @njit(cache=True, inline="always")
+def _cross(a: tuple, b: tuple) -> tuple:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True, inline="always")
+def _dot(a: tuple, b: tuple) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def _vec(a: np.ndarray) -> tuple:
+    return (a[0], a[1], a[2])
+
+
+@njit(cache=True)
 def _bend_twist_reduced(
-    e: np.ndarray,
-    f: np.ndarray,
-    m1e: np.ndarray,
-    m2e: np.ndarray,
-    m1f: np.ndarray,
-    m2f: np.ndarray,
+    e: tuple,
+    f: tuple,
+    m1e: tuple,
+    m2e: tuple,
+    m1f: tuple,
+    m2f: tuple,
     twist: float,
     l_i: float,
     k_b: float,
@@ -139,60 +153,48 @@ def _bend_twist_reduced(
     gk1: np.ndarray,
     gk2: np.ndarray,
     gtw: np.ndarray,
-    ws: np.ndarray,
     with_hessian: bool,
 ) -> None:
     """Gradient g (8) and Hessian h (8x8) of the bend+twist energy of one interior node
-    in the reduced coordinates (e, f, theta_e, theta_f). gk1/gk2/gtw (8) are scratch;
-    ws is a (9, 3) scratch of 3-vectors. Only the upper triangle of h is filled (the
-    Hessian is symmetric; the caller mirrors it).
+    in the reduced coordinates (e, f, theta_e, theta_f). gk1/gk2/gtw (8) are scratch.
+    Only the upper triangle of h is filled (the Hessian is symmetric; the caller mirrors
+    it). 3-vectors are tuples so that they live in registers: scratch arrays would alias
+    for LLVM and force reloads.
     """
-    te = ws[0]
-    tf = ws[1]
-    kb = ws[2]
-    tt = ws[3]  # tilde t
-    d1t = ws[4]  # tilde d1
-    d2t = ws[5]  # tilde d2
-    tmp = ws[6]
-    tmp2 = ws[7]
-    ne = math.sqrt(dot3(e, e))
-    nf = math.sqrt(dot3(f, f))
+    ne = math.sqrt(_dot(e, e))
+    nf = math.sqrt(_dot(f, f))
     # reciprocals hoisted: without fastmath LLVM keeps every division
     ine = 1.0 / ne
     inf_ = 1.0 / nf
-    for k in range(3):
-        te[k] = e[k] * ine
-        tf[k] = f[k] * inf_
-    chi = 1.0 + dot3(te, tf)
+    te = (e[0] * ine, e[1] * ine, e[2] * ine)
+    tf = (f[0] * inf_, f[1] * inf_, f[2] * inf_)
+    chi = 1.0 + _dot(te, tf)
     ichi = 1.0 / chi
-    cross3(te, tf, kb)
-    for k in range(3):
-        kb[k] *= 2.0 * ichi
-        tt[k] = (te[k] + tf[k]) * ichi
-        d1t[k] = (m1e[k] + m1f[k]) * ichi
-        d2t[k] = (m2e[k] + m2f[k]) * ichi
-    kappa1 = 0.5 * (dot3(kb, m2e) + dot3(kb, m2f))
-    kappa2 = -0.5 * (dot3(kb, m1e) + dot3(kb, m1f))
+    c = _cross(te, tf)
+    kb = (2.0 * ichi * c[0], 2.0 * ichi * c[1], 2.0 * ichi * c[2])
+    tt = ((te[0] + tf[0]) * ichi, (te[1] + tf[1]) * ichi, (te[2] + tf[2]) * ichi)
+    d1t = ((m1e[0] + m1f[0]) * ichi, (m1e[1] + m1f[1]) * ichi, (m1e[2] + m1f[2]) * ichi)
+    d2t = ((m2e[0] + m2f[0]) * ichi, (m2e[1] + m2f[1]) * ichi, (m2e[2] + m2f[2]) * ichi)
+    kappa1 = 0.5 * (_dot(kb, m2e) + _dot(kb, m2f))
+    kappa2 = -0.5 * (_dot(kb, m1e) + _dot(kb, m1f))
 
     # --- first derivatives (Bergou 2010 §4.2; primer eqs. for d kappa / d e) ---
-    cross3(tf, d2t, tmp)
-    cross3(te, d2t, tmp2)
+    a1 = _cross(tf, d2t)
+    b1 = _cross(te, d2t)
+    a2 = _cross(tf, d1t)
+    b2 = _cross(te, d1t)
     for k in range(3):
-        gk1[k] = (-kappa1 * tt[k] + tmp[k]) * ine
-        gk1[3 + k] = (-kappa1 * tt[k] - tmp2[k]) * inf_
-    cross3(tf, d1t, tmp)
-    cross3(te, d1t, tmp2)
-    for k in range(3):
-        gk2[k] = (-kappa2 * tt[k] - tmp[k]) * ine
-        gk2[3 + k] = (-kappa2 * tt[k] + tmp2[k]) * inf_
-    gk1[6] = -0.5 * dot3(kb, m1e)
-    gk1[7] = -0.5 * dot3(kb, m1f)
-    gk2[6] = -0.5 * dot3(kb, m2e)
-    gk2[7] = -0.5 * dot3(kb, m2f)
-    # d(reference twist)/de = kb / (2|e|), d/df = kb / (2|f|)  (Bergou 2010 eq. 9)
-    for k in range(3):
+        gk1[k] = (-kappa1 * tt[k] + a1[k]) * ine
+        gk1[3 + k] = (-kappa1 * tt[k] - b1[k]) * inf_
+        gk2[k] = (-kappa2 * tt[k] - a2[k]) * ine
+        gk2[3 + k] = (-kappa2 * tt[k] + b2[k]) * inf_
+        # d(reference twist)/de = kb / (2|e|), d/df = kb / (2|f|)  (Bergou 2010 eq. 9)
         gtw[k] = 0.5 * kb[k] * ine
         gtw[3 + k] = 0.5 * kb[k] * inf_
+    gk1[6] = -0.5 * _dot(kb, m1e)
+    gk1[7] = -0.5 * _dot(kb, m1f)
+    gk2[6] = -0.5 * _dot(kb, m2e)
+    gk2[7] = -0.5 * _dot(kb, m2f)
     gtw[6] = -1.0
     gtw[7] = 1.0
 
@@ -212,30 +214,16 @@ def _bend_twist_reduced(
     ine2 = ine * ine
     inf2 = inf_ * inf_
     inef = ine * inf_
+    h[6, 6] += cb * kappa1 * (-0.5 * _dot(kb, m2e)) + cb * kappa2 * (0.5 * _dot(kb, m1e))
+    h[7, 7] += cb * kappa1 * (-0.5 * _dot(kb, m2f)) + cb * kappa2 * (0.5 * _dot(kb, m1f))
     for pass_ in range(2):
         if pass_ == 0:
-            kap = kappa1
-            sgn = 1.0
-            dtl = d2t
-            mfe = m2e
-            mff = m2f
-            ome = m1e
-            omf = m1f
-            h[6, 6] += cb * kap * (-0.5 * dot3(kb, m2e))
-            h[7, 7] += cb * kap * (-0.5 * dot3(kb, m2f))
+            kap, sgn, dtl, mfe, mff, ome, omf = kappa1, 1.0, d2t, m2e, m2f, m1e, m1f
+            tmp, tmp2 = a1, b1  # tf x tilde_d, te x tilde_d
         else:
-            kap = kappa2
-            sgn = -1.0
-            dtl = d1t
-            mfe = m1e
-            mff = m1f
-            ome = m2e
-            omf = m2f
-            h[6, 6] += cb * kap * (0.5 * dot3(kb, m1e))
-            h[7, 7] += cb * kap * (0.5 * dot3(kb, m1f))
+            kap, sgn, dtl, mfe, mff, ome, omf = kappa2, -1.0, d1t, m1e, m1f, m2e, m2f
+            tmp, tmp2 = a2, b2
         w = cb * kap
-        cross3(tf, dtl, tmp)  # tf x tilde_d
-        cross3(te, dtl, tmp2)  # te x tilde_d
         for k in range(3):
             for m in range(k, 3):
                 ttkm = tt[k] * tt[m]
@@ -277,37 +265,36 @@ def _bend_twist_reduced(
                 )
             h[k, 3 + k] -= w * kap * ichi * inef
         # - sgn [tilde_d]_x / (|e||f|)
-        c = -w * sgn * inef
-        h[0, 4] += -c * dtl[2]
-        h[0, 5] += c * dtl[1]
-        h[1, 3] += c * dtl[2]
-        h[1, 5] += -c * dtl[0]
-        h[2, 3] += -c * dtl[1]
-        h[2, 4] += c * dtl[0]
+        cc = -w * sgn * inef
+        h[0, 4] += -cc * dtl[2]
+        h[0, 5] += cc * dtl[1]
+        h[1, 3] += cc * dtl[2]
+        h[1, 5] += -cc * dtl[0]
+        h[2, 3] += -cc * dtl[1]
+        h[2, 4] += cc * dtl[0]
         # edge-theta
         for col in range(6, 8):
             om = ome if col == 6 else omf
-            cross3(tf, om, tmp)
-            cross3(te, om, tmp2)
-            s_om = 0.5 * dot3(kb, om)
+            p1 = _cross(tf, om)
+            p2 = _cross(te, om)
+            s_om = 0.5 * _dot(kb, om)
             for k in range(3):
-                h[k, col] += w * (s_om * tt[k] - tmp[k] * ichi) * ine
-                h[3 + k, col] += w * (s_om * tt[k] + tmp2[k] * ichi) * inf_
+                h[k, col] += w * (s_om * tt[k] - p1[k] * ichi) * ine
+                h[3 + k, col] += w * (s_om * tt[k] + p2[k] * ichi) * inf_
 
     # --- ct * twist * (Hessian of the reference twist) (primer) ---
     w = ct * twist
-    for k in range(3):
-        tmp[k] = te[k] + tt[k]
-        tmp2[k] = tf[k] + tt[k]
-    c = 0.5 * w * inef
+    u1 = (te[0] + tt[0], te[1] + tt[1], te[2] + tt[2])
+    u2 = (tf[0] + tt[0], tf[1] + tt[1], tf[2] + tt[2])
+    cc = 0.5 * w * inef
     for k in range(3):
         for m in range(k, 3):
-            h[k, m] -= 0.25 * w * ine2 * (kb[k] * tmp[m] + tmp[k] * kb[m])
-            h[3 + k, 3 + m] -= 0.25 * w * inf2 * (kb[k] * tmp2[m] + tmp2[k] * kb[m])
+            h[k, m] -= 0.25 * w * ine2 * (kb[k] * u1[m] + u1[k] * kb[m])
+            h[3 + k, 3 + m] -= 0.25 * w * inf2 * (kb[k] * u2[m] + u2[k] * kb[m])
         for m in range(3):
-            h[k, 3 + m] -= c * kb[k] * tt[m]
-    # + c (2/chi) [te]_x
-    c2 = 2.0 * c * ichi
+            h[k, 3 + m] -= cc * kb[k] * tt[m]
+    # + cc (2/chi) [te]_x
+    c2 = 2.0 * cc * ichi
     h[0, 4] += -c2 * te[2]
     h[0, 5] += c2 * te[1]
     h[1, 3] += c2 * te[2]
@@ -331,22 +318,18 @@ def add_bend_twist(
     with_hessian: bool,
 ) -> None:
     """Bending and twisting force -dE/dq and Hessian over all interior nodes."""
-    e = np.empty(3)
-    f = np.empty(3)
     g = np.empty(8)
     h = np.zeros((8, 8))
     gk1 = np.empty(8)
     gk2 = np.empty(8)
     gtw = np.empty(8)
-    ws = np.empty((9, 3))
     for i in range(1, n_nodes - 1):
         a0 = 4 * (i - 1)
-        for k in range(3):
-            e[k] = q[a0 + 4 + k] - q[a0 + k]
-            f[k] = q[a0 + 8 + k] - q[a0 + 4 + k]
+        e = (q[a0 + 4] - q[a0], q[a0 + 5] - q[a0 + 1], q[a0 + 6] - q[a0 + 2])
+        f = (q[a0 + 8] - q[a0 + 4], q[a0 + 9] - q[a0 + 5], q[a0 + 10] - q[a0 + 6])
         _bend_twist_reduced(
-            e, f, m1[i - 1], m2[i - 1], m1[i], m2[i], twist[i], voronoi_lengths[i],
-            k_b, k_t, g, h, gk1, gk2, gtw, ws, with_hessian,
+            e, f, _vec(m1[i - 1]), _vec(m2[i - 1]), _vec(m1[i]), _vec(m2[i]), twist[i],
+            voronoi_lengths[i], k_b, k_t, g, h, gk1, gk2, gtw, with_hessian,
         )  # fmt: skip
         for a in range(11):
             force[a0 + a] -= _R_SIGN[a, 0] * g[_R_INDEX[a, 0]] + _R_SIGN[a, 1] * g[_R_INDEX[a, 1]]
