@@ -10,6 +10,7 @@ and returns the exit code: 0 on success, 1 when a simulation or measurement fail
   (``cnt_env.plotting``), each with its resolved config next to it (``<file>.json``).
 * ``cnt-sim measure TRACE``: the same measurements for a saved trace.
 * ``cnt-sim demo``: a short coil run that writes ``runs/demo/coil.png``.
+* ``cnt-sim sweep``: a grid of runs in parallel, resumable, with plots (``cnt_env.sweep``).
 
 The simulator and matplotlib are imported only by the commands that need them, so
 ``cnt-sim --version`` and argument errors are instant.
@@ -237,16 +238,22 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
         raise CliError(f"--seed must be >= 0, got {args.seed}")
     measure_options = measure_options_for(args.transient)
 
-    from cnt_env.deposition import ContactOptions, DepositionConfig
+    from cnt_env.deposition import PRESET_DEFAULTS, ContactOptions, DepositionConfig
 
+    mesh = PRESET_DEFAULTS[args.preset]
     try:
+        if args.delta is None:  # the preset's validated mesh
+            params = dataclasses.replace(params, delta_bar=mesh["delta_bar"])
+        coarse = args.coarse_delta
+        if coarse is None and args.delta is None:
+            coarse = mesh["coarse_delta"]
         contact = ContactOptions(mode=args.contact_mode)
         radius = args.initial_radius
         if radius is None:
             radius = DEFAULT_INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         sim_config = DepositionConfig(
             params=params, dt=args.dt, drag_law=args.drag_law, contact=contact,
-            initial_radius=radius, sliding=args.sliding, coarse_delta=args.coarse_delta,
+            initial_radius=radius, sliding=args.sliding, coarse_delta=coarse,
             fine_length=args.fine_length,
         )  # fmt: skip
     except ValueError as exc:
@@ -597,7 +604,12 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
         type=float,
         help="critical curvature kappa_c L_vb (stepped substrate)",
     )
-    g.add_argument("--delta", type=float, help="discretisation length delta / L_vb")
+    g.add_argument(
+        "--delta",
+        type=float,
+        help="discretisation length delta / L_vb (default: the preset's validated mesh, "
+        "coil 0.125 graded to 1, serpentine 1)",
+    )
     g.add_argument(
         "--dt",
         type=float,
@@ -712,6 +724,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--outdir", default="runs/demo", help="output directory (runs/demo)")
     demo.set_defaults(func=cmd_demo)
+
+    from cnt_env import sweep  # imports this module: deferred to avoid a cycle
+
+    sweep.add_parser(sub)
     return parser
 
 

@@ -505,3 +505,36 @@ def initial_shape(
         arc += step
         y += step
     return np.array(pts), np.array(rest)
+
+
+#: Validated defaults per preset (benchmarks/RESULTS.md): mesh, start-up arc radius.
+#: coil: delta = 0.125 near the contact (graded, coarse 1 above) puts R0 at 7.64 L_vb;
+#: serpentine: uniform delta = 1 gives the paper's amplitude and wavelength.
+PRESET_DEFAULTS: dict[str, dict] = {
+    "coil": {"delta_bar": 0.125, "coarse_delta": 1.0, "initial_radius": 6.4},
+    "serpentine": {"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 3.9},
+}
+
+
+def default_config(preset: str, **changes) -> DepositionConfig:
+    """The validated configuration of a preset (``units.paper_groups`` groups, mesh and
+    start-up from PRESET_DEFAULTS); ``changes`` go to DimensionlessParams fields or
+    DepositionConfig fields, by name."""
+    from dataclasses import fields
+
+    from .units import paper_groups
+
+    d = PRESET_DEFAULTS[preset]
+    param_names = {f.name for f in fields(DimensionlessParams)}
+    groups = {k: v for k, v in changes.items() if k in param_names}
+    rest = {k: v for k, v in changes.items() if k not in param_names}
+    params = paper_groups(preset, **{"delta_bar": d["delta_bar"], **groups})
+    coarse = rest.pop("coarse_delta", d["coarse_delta"])
+    if coarse is not None and coarse < params.delta_bar:
+        coarse = None  # a mesh coarser than the graded one's top: uniform
+    return DepositionConfig(
+        params=params,
+        coarse_delta=coarse,
+        initial_radius=rest.pop("initial_radius", d["initial_radius"]),
+        **rest,
+    )

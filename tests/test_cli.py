@@ -40,7 +40,7 @@ RUN_KEYS = {
     "version",
 }
 CONFIG_KEYS = {"dt", "drag_law", "sliding", "contact_mode", "seed", "initial_radius"}
-TINY = ["--deposit", "5", "--Hbar", "40", "--transient", "0"]
+TINY = ["--deposit", "5", "--Hbar", "40", "--transient", "0", "--delta", "1"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 

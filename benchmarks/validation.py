@@ -1,0 +1,165 @@
+"""Physics validation of the paper's baselines (physics.md §6), one suite each:
+
+* ``coil`` (issue 3): R0 against the paper's 7.64 L_vb, its convergence in delta and dt,
+  independence of the start-up radius R_i, the drag-law option, and the physical sanity
+  figures (deposition speed V Hbar, vdW work per length, kinetic energy lost to sticking).
+* ``serpentine`` (issue 4): amplitude and wavelength against Abar ~ 30 (26-33) and
+  lambdabar ~ 6-8, their convergence in delta and dt, the sliding option (B vs C),
+  kappa_c insensitivity, and the flow direction phi = 0.87.
+
+Each case runs the preset to ``--deposit`` L_vb and measures after ``--transient`` L_vb.
+Results are cached per case in ``benchmarks/results/<suite>_validation.json``
+(re-running skips finished cases), and a markdown table is printed.
+
+    python benchmarks/validation.py coil [--jobs 2] [--cases default,delta_half,...]
+    python benchmarks/validation.py serpentine --deposit 1500 --transient 150
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+
+DEFAULTS = {
+    "coil": {"delta_bar": 0.125, "coarse_delta": 1.0, "dt_factor": 0.05, "initial_radius": 6.4,
+             "drag_law": "linear"},
+    "serpentine": {"delta_bar": 1.0, "coarse_delta": None, "dt_factor": 0.05,
+                   "initial_radius": 3.9, "drag_law": "linear", "sliding": "B", "phi": 0.0,
+                   "kappa_c_bar": 0.2},
+}  # fmt: skip
+
+SERPENTINE_CASES: dict[str, dict] = {
+    "default": {},
+    "sliding_C": {"sliding": "C"},
+    "delta_half": {"delta_bar": 0.5},
+    "dt_half": {"dt_factor": 0.025},
+    "kappa_c_0.1": {"kappa_c_bar": 0.1},
+    "kappa_c_0.4": {"kappa_c_bar": 0.4},
+    "phi_0.87": {"phi": 0.87},
+}
+
+# name -> overrides of DEFAULTS["coil"]
+COIL_CASES: dict[str, dict] = {
+    "default": {},
+    "delta_1": {"delta_bar": 1.0, "coarse_delta": None},
+    "delta_0.5": {"delta_bar": 0.5},
+    "delta_0.25": {"delta_bar": 0.25},
+    "delta_half": {"delta_bar": 0.0625},
+    "dt_half": {"dt_factor": 0.025},
+    "Ri_4.8": {"initial_radius": 4.8},
+    "Ri_9.6": {"initial_radius": 9.6},
+    "printed_drag": {"drag_law": "printed"},
+    "printed_drag_delta_1": {"drag_law": "printed", "delta_bar": 1.0, "coarse_delta": None},
+    "uniform_0.25": {"delta_bar": 0.25, "coarse_delta": None},
+}
+
+
+def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
+    import math
+
+    from cnt_env.deposition import DepositionConfig, DepositionSim
+    from cnt_env.patterns import MeasureOptions, measure
+    from cnt_env.units import paper_groups
+
+    c = {**DEFAULTS[suite], **CASES[suite][name]}
+    groups = {"delta_bar": c["delta_bar"]}
+    extra = {}
+    if suite == "serpentine":
+        groups.update(phi=c["phi"], kappa_c_bar=c["kappa_c_bar"])
+        extra["sliding"] = c["sliding"]
+    config = DepositionConfig(
+        params=paper_groups(suite, **groups), dt_factor=c["dt_factor"],
+        initial_radius=c["initial_radius"], drag_law=c["drag_law"],
+        coarse_delta=c["coarse_delta"], **extra,
+    )  # fmt: skip
+    sim = DepositionSim(config, seed=0)
+    t0 = time.perf_counter()
+    sim.run(transient)
+    mid = sim.stats()
+    sim.run(deposit)
+    wall = time.perf_counter() - t0
+    st = sim.stats()
+    laid = st["deposited_length"] - mid["deposited_length"]
+    substrate = "stepped" if suite == "serpentine" else "flat"
+    phi = c.get("phi", 0.0)
+    m = measure(sim.trace(), MeasureOptions(transient_length=transient), substrate,
+                flow_direction=(math.cos(phi), math.sin(phi)))  # fmt: skip
+    keep = ("pattern", "coil_radius", "coil_radius_spread", "coil_coverage", "amplitude",
+            "amplitude_spread", "amplitude_cv", "peak_to_peak", "wavelength",
+            "wavelength_spread", "wavelength_cv", "n_uturns", "n_cycles", "n_loops",
+            "n_self_crossings")  # fmt: skip
+    return {
+        "case": name, **c, "deposit": deposit, "transient": transient,
+        **{k: m[k] for k in keep},
+        # after the transient: deposition speed in units of e_v/(sigma mu H), vdW work per
+        # laid length in e_v, kinetic energy discarded by sticking per laid length
+        "V_Hbar": laid / (st["time"] - mid["time"]) * config.params.Hbar,
+        "vdw_work_per_length": (st["vdw_work"] - mid["vdw_work"]) / laid,
+        "sticking_loss_per_length": (st["sticking_loss"] - mid["sticking_loss"]) / laid,
+        "steps": st["steps"], "newton_per_step": st["newton_iterations"] / st["steps"],
+        "halvings": st["halvings"], "n_nodes": st["n_nodes"], "wall_time_s": wall,
+    }  # fmt: skip
+
+
+def _row(suite: str, name: str, r: dict, ref: dict | None) -> str:
+    mesh = f"{r['delta_bar']}{'' if r['coarse_delta'] is None else ' (graded)'}"
+    common = f"| {name} | {mesh} | {r['dt_factor']} "
+    tail = (f"| {r['V_Hbar']:.3f} | {r['vdw_work_per_length']:.3f} "
+            f"| {r['newton_per_step']:.2f} | {r['wall_time_s']:.0f} |")  # fmt: skip
+    if suite == "coil":
+        rel = f"{100 * (r['coil_radius'] / ref['coil_radius'] - 1):+.1f}%" if ref else "-"
+        return (common + f"| {r['initial_radius']} | {r['drag_law']} | {r['coil_radius']:.3f} "
+                f"| {100 * (r['coil_radius'] / 7.64 - 1):+.1f}% | {rel} " + tail)  # fmt: skip
+    rel_a = f"{100 * (r['amplitude'] / ref['amplitude'] - 1):+.1f}%" if ref else "-"
+    rel_w = f"{100 * (r['wavelength'] / ref['wavelength'] - 1):+.1f}%" if ref else "-"
+    return (common + f"| {r['sliding']} | {r['kappa_c_bar']} | {r['phi']} | {r['pattern']} "
+            f"| {r['amplitude']:.2f} ({rel_a}) | {r['wavelength']:.2f} ({rel_w}) "
+            f"| {r['n_cycles']} | {r['n_loops']} " + tail)  # fmt: skip
+
+
+CASES = {"coil": COIL_CASES, "serpentine": SERPENTINE_CASES}
+HEADERS = {
+    "coil": "| case | delta | dt_factor | R_i | drag | R0 | vs 7.64 | vs default |",
+    "serpentine": "| case | delta | dt_factor | sliding | kappa_c | phi | pattern | amplitude "
+    "| wavelength | cycles | loops |",
+}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("suite", choices=sorted(CASES))
+    parser.add_argument("--cases", default=None, help="comma-separated (default: all)")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--deposit", type=float, default=700.0)
+    parser.add_argument("--transient", type=float, default=300.0)
+    parser.add_argument("--force", action="store_true", help="re-run finished cases")
+    args = parser.parse_args(argv)
+    results = RESULTS_DIR / f"{args.suite}_validation.json"
+    done = json.loads(results.read_text()) if results.exists() else {}
+    names = args.cases.split(",") if args.cases else list(CASES[args.suite])
+    todo = [c for c in names if args.force or c not in done]
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {
+            c: pool.submit(run_case, args.suite, c, args.deposit, args.transient) for c in todo
+        }
+        for name, fut in futures.items():
+            done[name] = fut.result()
+            results.parent.mkdir(parents=True, exist_ok=True)
+            results.write_text(json.dumps(done, indent=1, sort_keys=True))
+            print(f"finished {name}", flush=True)
+    ref = done.get("default")
+    header = HEADERS[args.suite] + " V Hbar | vdW work / length | Newton/step | wall s |"
+    print(header)
+    print("|" + "---|" * (header.count("|") - 1))
+    for name in CASES[args.suite]:
+        if name in done:
+            print(_row(args.suite, name, done[name], ref))
+
+
+if __name__ == "__main__":
+    main()
