@@ -41,6 +41,8 @@ SERPENTINE_CASES: dict[str, dict] = {
     "kappa_c_0.1": {"kappa_c_bar": 0.1},
     "kappa_c_0.4": {"kappa_c_bar": 0.4},
     "phi_0.87": {"phi": 0.87},
+    "dt_0.1": {"dt_factor": 0.1},
+    "dt_0.2": {"dt_factor": 0.2},
 }
 
 # name -> overrides of DEFAULTS["coil"]
@@ -138,8 +140,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--deposit", type=float, default=700.0)
     parser.add_argument("--transient", type=float, default=300.0)
     parser.add_argument("--force", action="store_true", help="re-run finished cases")
+    parser.add_argument("--results", default=None, help="JSON file (default: per suite)")
     args = parser.parse_args(argv)
-    results = RESULTS_DIR / f"{args.suite}_validation.json"
+    results = Path(args.results or RESULTS_DIR / f"{args.suite}_validation.json")
     done = json.loads(results.read_text()) if results.exists() else {}
     names = args.cases.split(",") if args.cases else list(CASES[args.suite])
     todo = [c for c in names if args.force or c not in done]

@@ -2,10 +2,26 @@
 
 The simulator runs in the dimensionless units of ``cnt_env.units``; SI appears
 only there and at the command line (``cnt-sim``, also ``python -m cnt_env``).
-"""
 
-# The gymnasium registration of CNTDeposit-v0 will go here once cnt_env.env exists.
+Importing the package registers ``CNTDeposit-v0`` with Gymnasium through an entry-point
+string, so that numba and the simulator load only when an env is made.
+"""
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+from gymnasium.envs.registration import register as _register
+from gymnasium.envs.registration import registry as _registry
+
+#: Episode length of ``CNTDeposit-v0`` (TimeLimit), in control steps of ~1 L_vb of trace:
+#: about 4 periods of the baseline serpentine, which lays ~95 L_vb of trace per period
+#: (benchmarks/env_throughput.py --baseline).
+MAX_EPISODE_STEPS = 400
+
+if "CNTDeposit-v0" not in _registry:
+    _register(
+        id="CNTDeposit-v0",
+        entry_point="cnt_env.env:CNTDepositEnv",
+        max_episode_steps=MAX_EPISODE_STEPS,
+    )
+
+__all__ = ["MAX_EPISODE_STEPS", "__version__"]

@@ -1,7 +1,7 @@
 """Target circuit paths for ``CNTDeposit-v0``: polylines in the substrate plane.
 
 A target is an ``(n, 2)`` float64 polyline of points ``(x, z)`` in L_vb, in the
-substrate plane (physics.md §1: the substrate is the x–z plane, the steps of the
+substrate plane (physics.md §1: the substrate is the x-z plane, the steps of the
 stepped substrate run along z). Every target starts at the origin; the env translates
 it so that it starts at the contact point at reset. Curved pieces are sampled at most
 ``CURVE_SPACING`` apart, so the polyline itself is the path (no spline underneath).
@@ -13,12 +13,12 @@ ranges are the ``*_RANGE`` constants below, lengths in L_vb, angles in rad):
 family          shape
 ==============  ==========================================================================
 ``straight``    a line at a heading angle
-``l_bend``      two legs joined by a corner of 60°–120° to either side
+``l_bend``      two legs joined by a corner of 60°-120° to either side
 ``arc``         a circular arc of a given radius and sweep, to either side
 ``zigzag``      legs of equal length, alternately turning by ± the same angle
 ``serpentine``  a U-shaped meander (a circuit meander element): runs across the direction
-                of progression joined by semicircles; amplitude ``A`` (peak to peak, the
-                convention of ``patterns.py``) and wavelength ``lambda``
+                of progression joined by semicircles; amplitude ``A`` (half the peak-to-
+                peak, the convention of ``patterns.py``) and wavelength ``lambda``
 ``smooth``      a random smooth curve: the heading follows a few random Fourier modes with
                 bounded curvature
 ==============  ==========================================================================
@@ -26,7 +26,8 @@ family          shape
 The ``HELD_OUT`` targets are fixed, named, and never drawn by :func:`sample`: they are
 for evaluation only. Most are shapes no family produces (S-curve, hairpin, square-wave
 meander, spiral, jog); ``paper_serpentine`` is the paper's baseline serpentine
-(A = 30, lambda = 7, physics.md §6), progressing along +x, across the steps.
+(A = 30, lambda = 7, physics.md §6; two periods), progressing along +x, across the
+steps.
 
 :func:`resolve` turns what ``reset(options={"target": ...})`` accepts (a
 :class:`Target`, a family name, a held-out name, or an explicit polyline) into a
@@ -41,6 +42,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -51,6 +53,8 @@ __all__ = [
     "Target",
     "draw",
     "held_out",
+    "mark_covered",
+    "polyline_distances",
     "polyline_length",
     "resample",
     "resolve",
@@ -73,9 +77,9 @@ ARC_SWEEP_RANGE = (math.pi / 3.0, math.pi)
 ZIGZAG_LEG_RANGE = (8.0, 25.0)
 ZIGZAG_TURN_RANGE = (math.radians(45.0), math.radians(120.0))
 ZIGZAG_LEGS_RANGE = (3, 8)  # inclusive
-SERPENTINE_AMPLITUDE_RANGE = (10.0, 35.0)
+SERPENTINE_AMPLITUDE_RANGE = (8.0, 35.0)  # half the peak-to-peak
 SERPENTINE_WAVELENGTH_RANGE = (5.0, 15.0)
-SERPENTINE_PERIODS_RANGE = (1, 3)  # inclusive
+SERPENTINE_PERIODS_RANGE = (1, 2)  # inclusive
 SMOOTH_LENGTH_RANGE = (40.0, 150.0)
 SMOOTH_MIN_RADIUS = 8.0  # the curvature of a smooth target stays below 1 / this
 SMOOTH_MODES = 3
@@ -160,6 +164,41 @@ def resample(points: ArrayLike, spacing: float) -> tuple[FloatArray, FloatArray]
     return samples, s
 
 
+@njit(cache=True)
+def polyline_distances(points: FloatArray, vertices: FloatArray, out: FloatArray) -> None:
+    """``out[i]`` = distance from ``points[i]`` (p, 2) to the polyline ``vertices`` (n, 2)."""
+    for i in range(points.shape[0]):
+        px, pz = points[i, 0], points[i, 1]
+        best = np.inf
+        for j in range(vertices.shape[0] - 1):
+            ax, az = vertices[j, 0], vertices[j, 1]
+            dx, dz = vertices[j + 1, 0] - ax, vertices[j + 1, 1] - az
+            rx, rz = px - ax, pz - az
+            len2 = dx * dx + dz * dz
+            t = (rx * dx + rz * dz) / len2 if len2 > 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            ex, ez = rx - t * dx, rz - t * dz
+            d2 = ex * ex + ez * ez
+            if d2 < best:
+                best = d2
+        out[i] = np.sqrt(best)
+
+
+@njit(cache=True)
+def mark_covered(samples: FloatArray, points: FloatArray, tol: float, hit: np.ndarray) -> None:
+    """Set ``hit[i]`` where ``samples[i]`` lies within ``tol`` of one of ``points``."""
+    tol2 = tol * tol
+    for i in range(samples.shape[0]):
+        if hit[i]:
+            continue
+        sx, sz = samples[i, 0], samples[i, 1]
+        for j in range(points.shape[0]):
+            dx, dz = sx - points[j, 0], sz - points[j, 1]
+            if dx * dx + dz * dz <= tol2:
+                hit[i] = True
+                break
+
+
 def _rotate(points: FloatArray, heading: float) -> FloatArray:
     c, s = math.cos(heading), math.sin(heading)
     return points @ np.array([[c, s], [-s, c]])
@@ -169,6 +208,7 @@ def _arc(start: FloatArray, heading: float, radius: float, sweep: float) -> Floa
     """Points of a circular arc from ``start`` (excluded) leaving along ``heading``;
     ``sweep`` > 0 turns counter-clockwise in (x, z)."""
     n = max(2, math.ceil(abs(sweep) * radius / CURVE_SPACING))
+    n += n % 2  # even: the arc's midpoint (a serpentine's apex) is a vertex
     sign = 1.0 if sweep > 0 else -1.0
     centre = start + radius * sign * np.array([-math.sin(heading), math.cos(heading)])
     angles = heading - sign * math.pi / 2 + np.linspace(0.0, sweep, n + 1)[1:]
@@ -205,14 +245,15 @@ def zigzag_points(leg: float, turn: float, n_legs: int, heading: float) -> Float
 def serpentine_points(
     amplitude: float, wavelength: float, periods: int, heading: float, side: int = 1
 ) -> FloatArray:
-    """U-shaped meander progressing along ``heading``: runs of ``amplitude - wavelength/2``
-    across it, joined by semicircles of diameter ``wavelength / 2`` (peak-to-peak
-    amplitude ``amplitude``, patterns.py). Starts at the origin in the middle of a run,
-    heading to ``side`` (+1: left of the progression, -1: right)."""
+    """U-shaped meander progressing along ``heading``: runs of ``2 amplitude - wavelength/2``
+    across it, joined by semicircles of diameter ``wavelength / 2``, so that the
+    peak-to-peak extent is ``2 amplitude`` (patterns.py: the amplitude is half the
+    peak-to-peak). Starts at the origin in the middle of a run, heading to ``side``
+    (+1: left of the progression, -1: right)."""
     r = wavelength / 4.0
-    run = amplitude - 2.0 * r
+    run = 2.0 * amplitude - 2.0 * r
     if run <= 0:
-        raise ValueError(f"serpentine amplitude {amplitude} must exceed wavelength / 2")
+        raise ValueError(f"serpentine amplitude {amplitude} must exceed wavelength / 4")
     pts = [np.zeros((1, 2)), np.array([[0.0, side * run / 2.0]])]
     direction = side
     for _ in range(2 * periods):
@@ -388,8 +429,8 @@ def _jog() -> FloatArray:
 #: Held-out evaluation targets: name -> (builder, params). Never drawn by :func:`sample`.
 _HELD_OUT_BUILDERS: dict[str, tuple[Callable[[], FloatArray], dict[str, Any]]] = {
     "paper_serpentine": (
-        lambda: serpentine_points(30.0, 7.0, 3, 0.0, 1),
-        {"amplitude": 30.0, "wavelength": 7.0, "periods": 3, "heading": 0.0, "side": 1},
+        lambda: serpentine_points(30.0, 7.0, 2, 0.0, 1),
+        {"amplitude": 30.0, "wavelength": 7.0, "periods": 2, "heading": 0.0, "side": 1},
     ),
     "s_curve": (_s_curve, {"radius": 25.0, "sweeps": [math.pi / 2, -math.pi / 2]}),
     "hairpin": (_hairpin, {"leg": 40.0, "radius": 10.0}),

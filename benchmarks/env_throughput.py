@@ -1,0 +1,199 @@
+"""Throughput of CNTDeposit-v0: control steps per second on one core, and reset times.
+
+For the default configuration (the paper's serpentine baseline, one control step ~1 L_vb
+of trace) it measures, in one process with one thread:
+
+* ``reset_cold_s``: the first reset with an empty warm-state cache (it simulates the
+  warm-up; numba compilation is excluded, it happens before the timing);
+* ``reset_warm_disk_s``: the first reset of a new env when the state is on disk;
+* ``reset_warm_memory_s``: the median reset of an env that has its warm state;
+* ``steps_per_s``: control steps per second over ``--steps`` steps with seeded random
+  actions (episodes restart through reset, whose time is not counted), with the share
+  of the time spent inside the simulator and the solver counts per control step.
+
+``--coarse-delta`` adds the same measurement with the graded discretisation
+(DepositionConfig.coarse_delta), a physics option the convergence study must validate
+before it could become a default. ``--baseline N`` also runs N control steps of the
+paper's constant flow (v̄ = 0.037 along +x) and measures the serpentine it lays, which
+sets the episode length (max_episode_steps). Prints one JSON object.
+
+    python benchmarks/env_throughput.py [--steps 200] [--coarse-delta 4] [--small]
+                                        [--baseline 600]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core: the figure is per core
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from cnt_env import warmstart  # noqa: E402
+from cnt_env.deposition import DepositionSim  # noqa: E402
+from cnt_env.env import CNTDepositEnv  # noqa: E402
+from cnt_env.patterns import MeasureOptions  # noqa: E402
+from cnt_env.patterns import measure as measure_pattern  # noqa: E402
+
+GOAL_STEPS_PER_S = 100.0
+
+
+def _compile(env: CNTDepositEnv) -> None:
+    """Load or compile the numba kernels outside every timing."""
+    sim = DepositionSim(env.config, seed=0)
+    sim.step()
+
+
+def measure(kwargs: dict, steps: int, seed: int = 0) -> dict:
+    with tempfile.TemporaryDirectory() as cache:
+        kwargs = dict(kwargs, cache_dir=cache)
+        env = CNTDepositEnv(**kwargs)
+        _compile(env)
+        warmstart.clear_memory_cache()
+        t0 = time.perf_counter()
+        env.reset(seed=seed)
+        reset_cold = time.perf_counter() - t0
+
+        warmstart.clear_memory_cache()
+        env2 = CNTDepositEnv(**kwargs)
+        t0 = time.perf_counter()
+        env2.reset(seed=seed)
+        reset_disk = time.perf_counter() - t0
+        memory = []
+        for k in range(5):
+            t0 = time.perf_counter()
+            env2.reset(seed=seed + 1 + k)
+            memory.append(time.perf_counter() - t0)
+
+        sim = env._sim
+        inner = sim.advance
+        in_sim = [0.0]
+
+        def timed_advance(duration: float) -> None:
+            t = time.perf_counter()
+            try:
+                inner(duration)
+            finally:
+                in_sim[0] += time.perf_counter() - t
+
+        sim.advance = timed_advance
+        rng = np.random.default_rng(seed)
+        wall, laid, prev, phys, newton, failures, episodes = 0.0, 0.0, 0.0, 0, 0, 0, 1
+        for _ in range(steps):
+            action = rng.uniform(-1.0, 1.0, 2).astype(np.float32)
+            t0 = time.perf_counter()
+            _, _, terminated, _, info = env.step(action)
+            wall += time.perf_counter() - t0
+            laid += info["laid_length"] - prev
+            prev = info["laid_length"]
+            phys += info["physics_steps"]
+            newton += info["newton_iterations"]
+            if terminated:
+                failures += "failure" in info
+                env.reset()
+                prev = 0.0
+                episodes += 1
+    return {
+        "params": {k: v for k, v in env.params.as_dict().items() if v is not None},
+        "substrate": env.substrate,
+        "coarse_delta": env.config.coarse_delta,
+        "dt": env.dt,
+        "control_interval": env.control_interval,
+        "n_substeps": env.n_substeps,
+        "warmup_length": env.warmup_length,
+        "reset_cold_s": round(reset_cold, 3),
+        "reset_warm_disk_s": round(reset_disk, 4),
+        "reset_warm_memory_s": round(statistics.median(memory), 4),
+        "steps": steps,
+        "episodes": episodes,
+        "failures": failures,
+        "steps_per_s": round(steps / wall, 2),
+        "ms_per_step": round(1e3 * wall / steps, 3),
+        "sim_share": round(in_sim[0] / wall, 4),
+        "env_overhead_ms_per_step": round(1e3 * (wall - in_sim[0]) / steps, 3),
+        "laid_per_step": round(laid / steps, 3),
+        "physics_steps_per_control_step": round(phys / steps, 2),
+        "newton_iterations_per_physics_step": round(newton / max(phys, 1), 3),
+        "us_per_newton_iteration": round(1e6 * in_sim[0] / max(newton, 1), 1),
+        "n_nodes": int(sim.rod.n_nodes),
+    }
+
+
+def baseline(kwargs: dict, steps: int) -> dict:
+    """The pattern laid by the preset's own constant flow over ``steps`` control steps."""
+    env = CNTDepositEnv(**dict(kwargs, reset_advance=0.0))
+    env.reset(seed=0, options={"target": "long_diagonal"})
+    p = env.params
+    u = p.vbar / env.vbar_max  # an action on an axis maps to that fraction of vbar_max
+    action = np.array([u * np.cos(p.phi), u * np.sin(p.phi)], dtype=np.float32)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        *_, info = env.step(action)
+    wall = time.perf_counter() - t0
+    trace = env._sim.trace()[env._n0 - 1 :]
+    m = measure_pattern(trace, MeasureOptions(transient_length=0.0), substrate=env.substrate)
+    periods = max(m["n_uturns"] - 1, 1) / 2.0
+    return {
+        "steps": steps,
+        "wall_s": round(wall, 2),
+        "laid_length": round(info["laid_length"], 2),
+        "laid_per_step": round(info["laid_length"] / steps, 3),
+        "pattern": m["pattern"],
+        "amplitude": round(m["amplitude"], 2),
+        "peak_to_peak": round(m.get("peak_to_peak", float("nan")), 2),
+        "wavelength": round(m["wavelength"], 2),
+        "n_uturns": m["n_uturns"],
+        "trace_per_period": round(m["measured_length"] / periods, 1),
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument(
+        "--coarse-delta",
+        type=float,
+        default=None,
+        help="also measure the graded discretisation with this coarse delta",
+    )
+    parser.add_argument(
+        "--small",
+        action="store_true",
+        help="the test-suite configuration (Hbar = 30) instead of the default",
+    )
+    parser.add_argument(
+        "--baseline",
+        type=int,
+        default=0,
+        help="also lay this many control steps at the preset's constant flow",
+    )
+    args = parser.parse_args(argv)
+    base: dict = {}
+    if args.small:
+        base = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0)
+    result = {
+        "benchmark": "env_throughput",
+        "machine": {"processor": platform.processor() or platform.machine(),
+                    "cpu_count": os.cpu_count(), "threads": 1},
+        "goal_steps_per_s": GOAL_STEPS_PER_S,
+        "default": measure(base, args.steps),
+    }  # fmt: skip
+    result["meets_goal"] = result["default"]["steps_per_s"] >= GOAL_STEPS_PER_S
+    if args.coarse_delta is not None:
+        result["graded"] = measure(dict(base, coarse_delta=args.coarse_delta), args.steps)
+    if args.baseline > 0:
+        with tempfile.TemporaryDirectory() as cache:
+            result["baseline_pattern"] = baseline(dict(base, cache_dir=cache), args.baseline)
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

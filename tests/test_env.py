@@ -1,0 +1,646 @@
+"""The CNTDeposit-v0 contract (style.md 11, design.md "The environment"): checkers,
+bit-identical same-seed rollouts, pickling, action clipping and rejection, the reward
+decomposition, vector envs, the warm-start cache, and a hypothesis fuzz.
+
+Everything runs on a small rod (Hbar = 30, a 3 L_vb warm-up, 10 physics steps per
+control step) with the warm-state cache in a temporary directory. The default
+configuration (the paper's serpentine baseline) is only constructed, not stepped.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import warnings
+from contextlib import contextmanager
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import cnt_env
+from cnt_env import targets as T
+from cnt_env import warmstart
+from cnt_env.env import CNTDepositEnv, flow_from_action
+from cnt_env.rod.stepper import SimulationError
+
+ENV_ID = "CNTDeposit-v0"
+# small rod: dt = 0.05 Hbar = 1.5 tau, so control_interval = 15 tau is 10 physics steps
+SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
+             control_interval=15.0, reset_advance=2.0, pattern_every=10)  # fmt: skip
+REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
+
+# Warnings the checkers may raise that are not defects of this env, as (message
+# fragment, reason) pairs. None is needed today: both checkers run warning-free.
+ALLOWED_WARNINGS: tuple[tuple[str, str], ...] = ()
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
+    return str(tmp_path_factory.mktemp("warm_cache"))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _no_user_cache(tmp_path_factory: pytest.TempPathFactory):
+    """Whatever a test forgets to pass, the warm-state cache never lands in the user's
+    cache directory (also in subprocess workers, which inherit the environment)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("default_cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def kw(cache_dir: str) -> dict:
+    return dict(SMALL, cache_dir=cache_dir)
+
+
+def make(kw: dict, **extra) -> gymnasium.Env:
+    return gymnasium.make(ENV_ID, **{**kw, **extra})
+
+
+def actions(seed: int, n: int) -> list[np.ndarray]:
+    g = np.random.default_rng(seed)
+    return [g.uniform(-1, 1, 2).astype(np.float32) for _ in range(n)]
+
+
+def assert_same(a, b, where: str = "") -> None:
+    """Exact equality of nested obs/info data (NaN equals NaN, types must match)."""
+    assert type(a) is type(b), f"{where}: {type(a)} != {type(b)}"
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            assert_same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_same(x, y, f"{where}[{i}]")
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape, where
+        assert np.array_equal(a, b, equal_nan=True), where
+    elif isinstance(a, float):
+        assert a == b or (math.isnan(a) and math.isnan(b)), f"{where}: {a!r} != {b!r}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def assert_same_step(s1: tuple, s2: tuple, where: str = "") -> None:
+    for name, x, y in zip(("obs", "reward", "terminated", "truncated", "info"), s1, s2,
+                          strict=True):  # fmt: skip
+        assert_same(x, y, f"{where} {name}")
+
+
+@contextmanager
+def no_unexpected_warnings():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    bad = [
+        str(w.message) for w in caught
+        if not any(pattern in str(w.message) for pattern, _reason in ALLOWED_WARNINGS)
+    ]  # fmt: skip
+    assert not bad, "unexpected warnings:\n" + "\n".join(bad)
+
+
+# ---- registration and construction ------------------------------------------------------
+
+
+def test_import_is_light_and_registers_the_env() -> None:
+    code = (
+        "import sys, cnt_env, gymnasium;"
+        "heavy = [m for m in ('numba', 'rerun', 'torch', 'cnt_env.env', 'cnt_env.deposition')"
+        " if m in sys.modules];"
+        "spec = gymnasium.spec('CNTDeposit-v0');"
+        "print(heavy, spec.entry_point, spec.max_episode_steps)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=os.environ.copy()).stdout.split("\n")[0]  # fmt: skip
+    assert out == "[] cnt_env.env:CNTDepositEnv 400"
+    assert gymnasium.spec(ENV_ID).max_episode_steps == cnt_env.MAX_EPISODE_STEPS
+
+
+def test_defaults_are_the_paper_serpentine_baseline() -> None:
+    env = CNTDepositEnv()  # construction only: no simulation until reset
+    p = env.params
+    assert (p.Hbar, p.Ibar, p.kappa_c_bar, p.vbar) == (155.0, 300.0, 0.2, 0.037)
+    assert env.substrate == "stepped" and env.vbar_max == 0.13
+    assert env.n_substeps == 30 and env.control_interval == pytest.approx(1.5 * 155.0)
+    assert env.warmup_length == 155.0
+    assert env.observation_space.shape == (81,) and env.observation_space.dtype == np.float32
+    assert np.all(np.isfinite(env.observation_space.low))
+    assert np.all(np.isfinite(env.observation_space.high))
+    assert env.action_space == gymnasium.spaces.Box(-1, 1, (2,), np.float32)
+    assert sum(env.observation_structure.values()) == 81
+    assert list(env.observation_structure) == ["trace", "target", "flow", "rod", "progress"]
+
+
+def test_substrate_keyword_maps_to_kappa_c() -> None:
+    assert CNTDepositEnv(substrate="flat").params.kappa_c_bar is None
+    assert CNTDepositEnv(substrate="stepped", kappa_c_bar=0.5).params.kappa_c_bar == 0.5
+    coil = CNTDepositEnv(preset="coil", substrate="stepped", vbar=0.05)
+    assert coil.params.kappa_c_bar == 0.2 and coil.params.Hbar == 253.0
+    assert CNTDepositEnv(preset="coil").substrate == "flat"
+    with pytest.raises(ValueError, match="stepped"):
+        CNTDepositEnv(substrate="flat", kappa_c_bar=0.2)
+    with pytest.raises(ValueError):
+        CNTDepositEnv(substrate="wavy")
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [dict(control_interval=16.0), dict(control_interval=-1.0), dict(control_interval=math.nan),
+     dict(vbar=0.2), dict(vbar_max=0.0), dict(tolerance=0.0), dict(n_trace_points=0),
+     dict(image_size=32), dict(families=("circle",)), dict(families=("paper_serpentine",)),
+     dict(obs_mode="pixels"), dict(Hbar=-3.0), dict(coverage_weight=0.0, precision_weight=0.0,
+     progress_weight=0.0), dict(pattern_every=-1), dict(render_mode="ascii")],
+)  # fmt: skip
+def test_bad_keywords_raise(bad: dict) -> None:
+    with pytest.raises(ValueError):
+        CNTDepositEnv(**{**SMALL, **bad})
+
+
+def test_control_interval_derives_substeps() -> None:
+    env = CNTDepositEnv(**{**SMALL, "control_interval": 45.0})
+    assert env.dt == 1.5 and env.n_substeps == 30
+    env = CNTDepositEnv(**{**SMALL, "control_interval": None, "dt": 2.0})
+    assert env.n_substeps == round(1.5 * 30 / 2.0) and env.control_interval == 22 * 2.0
+
+
+def test_flow_from_action_maps_the_square_onto_the_disk() -> None:
+    vmax = 0.13
+    assert flow_from_action(np.array([0.0, 0.0]), vmax) == (0.0, 0.0)
+    for a, phi in [((1, 0), 0.0), ((0, 1), math.pi / 2), ((-1, 0), math.pi),
+                   ((1, 1), math.pi / 4), ((-1, -1), -3 * math.pi / 4)]:  # fmt: skip
+        v, p = flow_from_action(np.array(a, dtype=float), vmax)
+        assert v == pytest.approx(vmax, rel=1e-12) and p == pytest.approx(phi)
+    g = np.random.default_rng(0)
+    speeds = [flow_from_action(g.uniform(-1, 1, 2), vmax)[0] for _ in range(2000)]
+    assert max(speeds) <= vmax
+
+
+# ---- the checkers -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("obs_mode", ["vector", "image"])
+def test_gymnasium_check_env(kw: dict, obs_mode: str) -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    env = make(kw, obs_mode=obs_mode, render_mode="rgb_array")
+    with no_unexpected_warnings():
+        check_env(env.unwrapped)
+    env.close()
+
+
+@pytest.mark.parametrize("obs_mode", ["vector", "image"])
+def test_sb3_check_env(kw: dict, obs_mode: str) -> None:
+    from stable_baselines3.common.env_checker import check_env
+
+    env = make(kw, obs_mode=obs_mode)
+    with no_unexpected_warnings():
+        check_env(env.unwrapped, warn=True)
+    env.close()
+
+
+# ---- determinism, pickling, actions --------------------------------------------------------
+
+
+def rollout(env: gymnasium.Env, acts: list[np.ndarray], seed: int | None = None) -> list:
+    steps = []
+    if seed is not None:
+        steps.append(env.reset(seed=seed))
+    for a in acts:
+        s = env.step(a)
+        steps.append(s)
+        if s[2] or s[3]:
+            steps.append(env.reset())
+    return steps
+
+
+def test_same_seed_same_actions_are_bit_identical(kw: dict) -> None:
+    acts = actions(1, 30)
+    a, b = make(kw), make(kw)
+    ra, rb = rollout(a, acts, seed=42), rollout(b, acts, seed=42)
+    assert len(ra) == len(rb) >= 31
+    for i, (sa, sb) in enumerate(zip(ra, rb, strict=True)):
+        if len(sa) == 2:
+            assert_same(sa[0], sb[0], f"reset {i} obs")
+            assert_same(sa[1], sb[1], f"reset {i} info")
+        else:
+            assert_same_step(sa, sb, f"step {i}")
+    assert any("pattern" in s[-1] for s in ra)  # info["pattern"] is compared as well
+    c = make(kw)
+    rc = rollout(c, acts, seed=43)
+    assert not np.array_equal(ra[-1][0], rc[-1][0])
+
+
+def test_pickled_env_continues_identically(kw: dict) -> None:
+    env = make(kw)
+    rollout(env, actions(2, 5), seed=7)
+    copy = pickle.loads(pickle.dumps(env))
+    acts = actions(3, 12)
+    for i, (sa, sb) in enumerate(zip(rollout(env, acts), rollout(copy, acts), strict=True)):
+        if len(sa) == 2:
+            assert_same(sa[0], sb[0], f"reset {i}")
+        else:
+            assert_same_step(sa, sb, f"step {i}")
+
+
+def test_out_of_bound_action_acts_like_the_bound(kw: dict) -> None:
+    a, b = make(kw), make(kw)
+    a.reset(seed=5)
+    b.reset(seed=5)
+    for past, bound in [([7.0, -3.0], [1.0, -1.0]), ([0.25, 1e30], [0.25, 1.0]),
+                        ([-1.0000001, 0.0], [-1.0, 0.0])]:  # fmt: skip
+        sa = a.step(np.array(past, dtype=np.float64))
+        sb = b.step(np.array(bound, dtype=np.float32))
+        assert_same_step(sa, sb, str(past))
+        assert sa[-1]["flow_vbar"] <= 0.13
+
+
+@pytest.mark.parametrize(
+    "bad", [[math.nan, 0.0], [0.0, math.inf], [-math.inf, 0.5], [0.1, 0.2, 0.3], [[0.1, 0.2]]]
+)
+def test_non_finite_or_misshaped_action_raises_and_changes_nothing(kw: dict, bad) -> None:
+    env, ref = make(kw).unwrapped, make(kw).unwrapped
+    env.reset(seed=9)
+    ref.reset(seed=9)
+    with pytest.raises(ValueError):
+        env.step(np.array(bad, dtype=np.float32))
+    act = np.array([0.3, -0.4], dtype=np.float32)
+    assert_same_step(env.step(act), ref.step(act), "after the rejected action")
+
+
+# ---- rewards and episode end ----------------------------------------------------------------
+
+
+def test_reward_is_the_sum_of_its_terms_and_the_return_is_the_final_score(kw: dict) -> None:
+    env = make(kw, max_episode_steps=60)
+    _obs, info = env.reset(seed=11, options={"target": "zigzag"})
+    assert info["score"] == 0.0 and all(info[k] == 0.0 for k in REWARD_KEYS)
+    ret, n = 0.0, 0
+    while True:
+        _obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        n += 1
+        parts = [info[k] for k in REWARD_KEYS]
+        assert reward == sum(parts)  # exact: the env adds them in this order
+        assert sorted(k for k in info if k.startswith("reward_")) == sorted(REWARD_KEYS)
+        assert math.isfinite(reward)
+        ret += reward
+        assert ret == pytest.approx(info["score"], abs=1e-12)
+        for key in ("coverage", "precision", "progress"):
+            assert 0.0 <= info[key] <= 1.0
+        if terminated or truncated:
+            break
+    assert truncated and n == 60
+    assert ret == pytest.approx(info["score"], abs=1e-12)
+    assert "pattern" in info  # measured on the last step before the TimeLimit
+    assert (
+        info["n_laid"] > 0
+        and info["laid_length"] > 0
+        and info["sim_time"] == pytest.approx(60 * 15.0)
+    )
+
+
+def test_laying_the_target_terminates_with_success(kw: dict) -> None:
+    env = make(kw)
+    env.reset(seed=1, options={"target": [[0.0, 0.0], [0.6, 0.0]]})
+    ret = 0.0
+    for _ in range(50):
+        _obs, reward, terminated, _truncated, info = env.step(np.zeros(2, dtype=np.float32))
+        ret += reward
+        if terminated:
+            break
+    assert terminated and info["is_success"] and "failure" not in info
+    assert info["progress"] == 1.0 and info["target"] == "custom"
+    assert ret == pytest.approx(info["score"], abs=1e-12)
+    assert "pattern" in info or info["n_laid"] < 2
+
+
+def test_simulation_failure_is_a_clean_penalised_termination(kw: dict) -> None:
+    env = make(kw, failure_penalty=0.7)
+    env.reset(seed=2)
+    ret = 0.0
+    for a in actions(4, 3):
+        ret += env.step(a)[1]
+    sim = env.unwrapped.sim
+
+    def fail(duration: float) -> None:
+        sim.step()  # part of the interval happens, then the solver gives up
+        raise SimulationError("Newton did not converge within max_iter", 1, sim.time, 1.0, {})
+
+    sim.advance = fail
+    obs, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], np.float32))
+    ret += reward
+    assert terminated and not truncated and not info["is_success"]
+    assert info["failure"] == "Newton did not converge within max_iter"
+    assert info["reward_failure"] == -0.7 and reward == sum(info[k] for k in REWARD_KEYS)
+    assert reward == pytest.approx(-0.7) and ret == pytest.approx(info["score"], abs=1e-12)
+    assert np.all(np.isfinite(obs)) and obs in env.observation_space
+    again = env.step(np.array([1.0, 0.0], np.float32))
+    assert again[1] == 0.0 and again[2] and again[-1]["failure"] == info["failure"]
+    del sim.advance
+    env.reset(seed=3)  # a reset recovers
+    assert "failure" not in env.step(np.zeros(2, np.float32))[-1]
+
+
+def test_a_real_newton_failure_ends_the_episode_cleanly(kw: dict) -> None:
+    """One Newton iteration and no dt halving: the solver gives up at once (also in the
+    random advance at reset, which then starts from the warm state itself)."""
+    from cnt_env.rod.stepper import NewtonOptions
+
+    env = make(kw, warmup_length=0.0,
+               sim_options={"newton": NewtonOptions(max_iter=1, max_halvings=0)})  # fmt: skip
+    obs, info = env.reset(seed=0)
+    assert info["reset_advance"] == 0.0 and np.all(np.isfinite(obs))
+    obs, reward, terminated, truncated, info = env.step(np.zeros(2, np.float32))
+    assert terminated and not truncated and not info["is_success"]
+    assert info["failure"] == "Newton did not converge within max_iter"
+    assert reward == -1.0 == info["score"] and np.all(np.isfinite(obs))
+
+
+def test_truncation_is_the_time_limits(kw: dict) -> None:
+    env = make(kw, max_episode_steps=3)
+    env.reset(seed=0, options={"target": "long_diagonal"})
+    flags = [env.step(np.zeros(2, np.float32))[2:4] for _ in range(3)]
+    assert flags == [(False, False), (False, False), (False, True)]
+
+
+# ---- reset options, observations, rendering ---------------------------------------------------
+
+
+def test_target_starts_at_the_contact_point(kw: dict) -> None:
+    env = make(kw).unwrapped
+    obs, info = env.reset(seed=4, options={"target": "hairpin"})
+    assert info["target"] == "hairpin"
+    contact = env.sim.trace()[-1][[0, 2]]
+    assert env.episode_start == env.sim.n_trace
+    np.testing.assert_array_equal(env.target_path[0], contact)
+    np.testing.assert_allclose(env.target_path - contact, T.held_out("hairpin").points)
+    # the first observed target point is target_spacing along the path from its start
+    tgt = obs[env.observation_slices["target"]].reshape(-1, 2)
+    assert np.hypot(*tgt[0]) == pytest.approx(env.target_spacing, rel=1e-5)
+    # the last observed trace point is the node deposited just before the contact point
+    past = obs[env.observation_slices["trace"]].reshape(-1, 2)
+    assert 0.5 < np.hypot(*past[-1]) < 1.5
+    with pytest.raises(ValueError):
+        env.reset(options={"target": "nonsense"})
+    with pytest.raises(ValueError):
+        env.reset(options={"goal": "arc"})
+
+
+def test_observation_reports_the_applied_flow(kw: dict) -> None:
+    env = make(kw).unwrapped
+    obs, _ = env.reset(seed=0)
+    flow = obs[env.observation_slices["flow"]]
+    np.testing.assert_allclose(flow, [0.037 / 0.13, 0.0], rtol=1e-6)  # the warm-up flow
+    obs, *_, info = env.step(np.array([0.0, -1.0], np.float32))
+    np.testing.assert_allclose(obs[env.observation_slices["flow"]], [0.0, -1.0], atol=1e-7)
+    assert info["flow_vbar"] == pytest.approx(0.13) and info["flow_phi"] == -math.pi / 2
+
+
+def test_image_observation_draws_trace_target_and_rod(kw: dict) -> None:
+    env = make(kw, obs_mode="image")
+    obs, _ = env.reset(seed=0, options={"target": "s_curve"})
+    assert obs.shape == (64, 64, 3) and obs.dtype == np.uint8
+    for _ in range(5):
+        obs = env.step(np.array([0.5, 0.5], np.float32))[0]
+    for channel in range(3):
+        assert obs[..., channel].any(), channel
+    assert (obs[..., 0] == 255).any()  # this episode's trace
+
+
+def test_render_modes(kw: dict) -> None:
+    env = make(kw, render_mode="rgb_array", render_size=128)
+    env.reset(seed=0)
+    env.step(np.zeros(2, np.float32))
+    frame = env.render()
+    assert frame.shape == (128, 128, 3) and frame.dtype == np.uint8
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) >= 4  # several layers drawn
+    human = make(kw, render_mode="human")  # headless: matplotlib's Agg, no window
+    human.reset(seed=0)
+    human.step(np.zeros(2, np.float32))
+    assert human.render() is None
+    human.close()
+    human.close()
+
+
+# ---- vector envs ---------------------------------------------------------------------------
+
+
+def test_make_vec_async_runs(kw: dict) -> None:
+    envs = gymnasium.make_vec(ENV_ID, num_envs=2, vectorization_mode="async", **kw)
+    try:
+        obs, info = envs.reset(seed=[0, 1])
+        assert obs.shape == (2, 81) and obs.dtype == np.float32
+        envs.action_space.seed(0)
+        for _ in range(4):
+            obs, reward, _terminated, _truncated, info = envs.step(envs.action_space.sample())
+            assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward))
+        assert "score" in info and info["score"].shape == (2,)
+    finally:
+        envs.close()
+
+
+def test_sb3_subprocvecenv_runs(kw: dict) -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    # "module:id" makes gymnasium import cnt_env (and so register) in the fresh workers
+    venv = make_vec_env("cnt_env:CNTDeposit-v0", n_envs=2, seed=0, vec_env_cls=SubprocVecEnv,
+                        env_kwargs=kw)  # fmt: skip
+    try:
+        obs = venv.reset()
+        assert obs.shape == (2, 81)
+        for _ in range(4):
+            obs, reward, _done, infos = venv.step(np.array(actions(5, 2)))
+            assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward))
+            assert len(infos) == 2 and "reward_coverage" in infos[0]
+    finally:
+        venv.close()
+
+
+# ---- warm-start cache ---------------------------------------------------------------------
+
+
+def warm_files(directory: str | Path) -> list[Path]:
+    return sorted(Path(directory).glob("warm-*.npz"))
+
+
+def test_warm_state_is_cached_on_disk_and_corruption_is_rebuilt(tmp_path: Path) -> None:
+    kw = dict(SMALL, cache_dir=str(tmp_path), warmup_length=2.0, substrate="flat")
+    warmstart.clear_memory_cache()
+    cold = CNTDepositEnv(**kw)
+    obs_cold, info_cold = cold.reset(seed=3)
+    assert cold.warm_start_source == "computed"
+    (path,) = warm_files(tmp_path)
+    # no pickle inside: loads with allow_pickle=False, no object arrays
+    with np.load(path, allow_pickle=False) as z:
+        assert all(z[name].dtype != object for name in z.files)
+    assert CNTDepositEnv(**kw).reset(seed=3) and warmstart._memory  # memory hit
+    warmstart.clear_memory_cache()
+    disk = CNTDepositEnv(**kw)
+    assert_same(disk.reset(seed=3), (obs_cold, info_cold), "from disk")
+    assert disk.warm_start_source == "disk"
+    a = np.array([0.2, 0.9], np.float32)
+    assert_same_step(disk.step(a), cold.step(a), "disk vs computed")
+
+    def flip(b: bytes) -> bytes:
+        i = len(b) // 2
+        return b[:i] + bytes([b[i] ^ 0xFF]) + b[i + 1 :]
+
+    def tamper(b: bytes) -> bytes:
+        """A well-formed archive whose data no longer match the stored checksum."""
+        with np.load(io.BytesIO(b), allow_pickle=False) as z:
+            arrays = {name: z[name] for name in z.files}
+        arrays["rod/q"] = arrays["rod/q"] + 1e-12
+        out = io.BytesIO()
+        np.savez(out, **arrays)
+        return out.getvalue()
+
+    good = path.read_bytes()
+    for corrupt in (lambda b: b[: len(b) // 2], lambda b: b[:-100] + bytes(100), lambda b: b"",
+                    flip, tamper):  # fmt: skip
+        path.write_bytes(corrupt(good))
+        warmstart.clear_memory_cache()
+        env = CNTDepositEnv(**kw)
+        assert_same(env.reset(seed=3), (obs_cold, info_cold), "rebuilt")
+        assert env.warm_start_source == "rebuilt"
+    # a valid file of another configuration under this name is rebuilt too
+    other = dict(kw, warmup_length=1.0)
+    warmstart.clear_memory_cache()
+    CNTDepositEnv(**other).reset(seed=0)
+    files = warm_files(tmp_path)
+    assert len(files) == 2
+    foreign = next(f for f in files if f != path)
+    path.write_bytes(foreign.read_bytes())
+    warmstart.clear_memory_cache()
+    env = CNTDepositEnv(**kw)
+    assert_same(env.reset(seed=3), (obs_cold, info_cold), "foreign file")
+    assert env.warm_start_source == "rebuilt"
+
+
+def test_cache_directory_comes_from_the_environment_variable(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path / "from_env"))
+    assert warmstart.default_cache_dir() == tmp_path / "from_env"
+    warmstart.clear_memory_cache()
+    env = CNTDepositEnv(**dict(SMALL, warmup_length=1.5, substrate="flat"))
+    env.reset(seed=0)
+    assert len(warm_files(tmp_path / "from_env")) == 1
+
+
+def test_cache_key_changes_with_the_configuration(kw: dict) -> None:
+    kw = dict(kw, control_interval=None)  # derived from dt, which follows Hbar
+    base = CNTDepositEnv(**kw)
+    key = warmstart.config_key(base.config, base.warmup_length, 0)
+    assert key == warmstart.config_key(CNTDepositEnv(**kw).config, base.warmup_length, 0)
+    for change in (dict(Hbar=31.0), dict(vbar=0.05), dict(substrate="flat"), dict(dt=1.0)):
+        env = CNTDepositEnv(**{**kw, **change})
+        assert warmstart.config_key(env.config, env.warmup_length, 0) != key, change
+    assert warmstart.config_key(base.config, 4.0, 0) != key
+    assert warmstart.config_key(base.config, base.warmup_length, 1) != key
+
+
+def test_snapshot_codec_round_trips_types_and_bits() -> None:
+    snap = {
+        "a": np.arange(5.0), "b": np.zeros((2, 3), np.uint8), "i": 3, "f": 0.1, "t": True,
+        "n": None, "s": "x", "np": np.float64(1.5), "l": [1, 2], "tu": (0.5, 0.25),
+        "nest": {"deep": {"q": np.array([1e-300, -0.0, np.pi])}, "k": -7},
+    }  # fmt: skip
+    back = warmstart.unflatten_snapshot(warmstart.flatten_snapshot(snap))
+    assert_same(back, snap)
+    with pytest.raises(TypeError):
+        warmstart.flatten_snapshot({"o": object()})
+    with pytest.raises(TypeError):
+        warmstart.flatten_snapshot({"a/b": 1})
+    json.dumps(str(warmstart.flatten_snapshot(snap)["__manifest__"]))
+
+
+# ---- fuzz --------------------------------------------------------------------------------------
+
+
+@contextmanager
+def time_limit(seconds: int):
+    def on_alarm(signum, frame):
+        raise TimeoutError(f"no answer within {seconds} s: a hang")
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+TARGETS = st.one_of(
+    st.sampled_from(sorted(T.FAMILIES) + list(T.HELD_OUT)),
+    st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=6).filter(
+        lambda p: T.polyline_length(np.array(p)) > 1e-3
+    ),
+)
+ACTION_VALUES = st.one_of(
+    st.floats(-1, 1, width=32),
+    st.floats(-1e6, 1e6),
+    st.sampled_from([math.nan, math.inf, -math.inf, 1.0000001, -0.0, 5e-324]),
+)
+KEYWORDS = st.fixed_dictionaries(
+    {
+        "Hbar": st.sampled_from([20.0, 30.0]),
+        "drag_law": st.sampled_from(["linear", "printed"]),
+        "substrate": st.sampled_from(["flat", "stepped"]),
+        "vbar": st.sampled_from([0.0, 0.037, 0.13]),
+        "phi": st.sampled_from([0.0, 2.0]),
+        "vbar_max": st.floats(0.13, 0.5),
+        "n_substeps": st.integers(1, 20),
+        "tolerance": st.floats(0.05, 20.0),
+        "n_trace_points": st.integers(1, 8),
+        "n_target_points": st.integers(1, 8),
+        "target_spacing": st.floats(0.1, 20.0),
+        "obs_mode": st.sampled_from(["vector", "image"]),
+        "failure_penalty": st.floats(0.0, 5.0),
+        "reset_advance": st.floats(0.0, 3.0),
+        "pattern_every": st.integers(0, 3),
+    }
+)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
+@given(
+    keywords=KEYWORDS,
+    target=TARGETS,
+    seed=st.integers(0, 2**31 - 1),
+    acts=st.lists(st.tuples(ACTION_VALUES, ACTION_VALUES), min_size=1, max_size=10),
+)
+def test_fuzz_steps_are_finite_or_fail_cleanly(keywords, target, seed, acts, cache_dir) -> None:
+    keywords = dict(keywords)
+    n_substeps = keywords.pop("n_substeps")
+    dt = 0.05 * keywords["Hbar"]  # DepositionConfig's default physics step
+    env = CNTDepositEnv(**{**SMALL, **keywords, "control_interval": n_substeps * dt,
+                           "cache_dir": cache_dir})  # fmt: skip
+    with time_limit(60):
+        obs, info = env.reset(seed=seed, options={"target": target})
+        assert obs in env.observation_space
+        for a in acts:
+            action = np.array(a, dtype=np.float64)
+            if not np.all(np.isfinite(action)):
+                with pytest.raises(ValueError):
+                    env.step(action)
+                continue
+            obs, reward, terminated, _truncated, info = env.step(action)
+            assert obs in env.observation_space
+            assert np.all(np.isfinite(obs.astype(np.float64)))
+            assert math.isfinite(reward) and math.isfinite(info["score"])
+            assert reward == sum(info[k] for k in REWARD_KEYS)
+            assert info["flow_vbar"] <= env.vbar_max
+            if terminated:
+                assert info["is_success"] or isinstance(info.get("failure"), str)
+                break

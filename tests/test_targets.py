@@ -1,0 +1,211 @@
+"""Target paths (cnt_env.targets): every family's geometry, determinism given the seed,
+the held-out set, and what reset(options={"target": ...}) accepts."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cnt_env import targets as T
+
+
+def rng(seed: int = 0) -> np.random.Generator:
+    return np.random.default_rng(seed)
+
+
+def headings(points: np.ndarray) -> np.ndarray:
+    d = np.diff(points, axis=0)
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def turning(points: np.ndarray) -> np.ndarray:
+    """Signed turn at each interior vertex (rad)."""
+    h = headings(points)
+    return np.angle(np.exp(1j * np.diff(h)))
+
+
+@pytest.mark.parametrize("family", sorted(T.FAMILIES))
+def test_family_is_a_valid_target_from_the_origin(family: str) -> None:
+    for seed in range(20):
+        t = T.draw(family, rng(seed))
+        assert t.name == family
+        assert t.points.dtype == np.float64 and t.points.ndim == 2 and t.points.shape[1] == 2
+        np.testing.assert_array_equal(t.points[0], [0.0, 0.0])
+        assert np.isfinite(t.points).all()
+        assert 5.0 < t.length < 1000.0
+        seg = np.hypot(*np.diff(t.points, axis=0).T)
+        assert seg.min() > 0.0
+        assert not t.points.flags.writeable
+
+
+@pytest.mark.parametrize("family", sorted(T.FAMILIES))
+def test_family_draws_are_deterministic_given_the_seed(family: str) -> None:
+    a, b, c = T.draw(family, rng(7)), T.draw(family, rng(7)), T.draw(family, rng(8))
+    np.testing.assert_array_equal(a.points, b.points)
+    assert a.params == b.params
+    assert not (a.points.shape == c.points.shape and np.array_equal(a.points, c.points))
+
+
+def test_straight_has_the_drawn_length_and_heading() -> None:
+    t = T.draw("straight", rng(1))
+    lo, hi = T.STRAIGHT_LENGTH_RANGE
+    assert lo <= t.length <= hi
+    assert t.length == pytest.approx(t.params["length"], rel=1e-12)
+    end = t.points[-1]
+    assert math.atan2(end[1], end[0]) == pytest.approx(t.params["heading"], abs=1e-12)
+
+
+def test_l_bend_turns_once_by_the_drawn_angle() -> None:
+    for seed in range(10):
+        t = T.draw("l_bend", rng(seed))
+        assert len(t.points) == 3
+        assert abs(t.params["turn"]) >= T.L_BEND_TURN_RANGE[0]
+        assert turning(t.points)[0] == pytest.approx(t.params["turn"], abs=1e-9)
+        assert t.length == pytest.approx(t.params["leg1"] + t.params["leg2"])
+
+
+def test_arc_is_on_a_circle_with_the_drawn_sweep() -> None:
+    t = T.draw("arc", rng(2))
+    r, sweep, h = t.params["radius"], t.params["sweep"], t.params["heading"]
+    sign = 1.0 if sweep > 0 else -1.0
+    centre = r * sign * np.array([-math.sin(h), math.cos(h)])
+    np.testing.assert_allclose(np.hypot(*(t.points - centre).T), r, rtol=1e-12)
+    assert np.sum(turning(t.points)) + turning(t.points)[0] == pytest.approx(sweep, rel=0.02)
+    # chord sampling: consecutive points at most CURVE_SPACING apart
+    assert np.hypot(*np.diff(t.points, axis=0).T).max() <= T.CURVE_SPACING + 1e-12
+
+
+def test_zigzag_alternates_turns_and_progresses_along_its_heading() -> None:
+    t = T.draw("zigzag", rng(3))
+    turns = turning(t.points)
+    assert len(turns) == t.params["n_legs"] - 1
+    np.testing.assert_allclose(np.abs(turns), t.params["turn"], rtol=1e-9)
+    assert np.all(np.sign(turns[1:]) == -np.sign(turns[:-1]))
+    d = t.points[-1]
+    h = t.params["heading"]
+    along = d[0] * math.cos(h) + d[1] * math.sin(h)
+    across = -d[0] * math.sin(h) + d[1] * math.cos(h)
+    assert along > 0 and abs(across) <= t.params["leg"]
+
+
+def test_serpentine_has_the_drawn_amplitude_and_wavelength() -> None:
+    for seed in range(5):
+        t = T.draw("serpentine", rng(seed))
+        a, lam, h = t.params["amplitude"], t.params["wavelength"], t.params["heading"]
+        # back to the canonical frame: progression along +x, runs along z
+        c, s = math.cos(h), math.sin(h)
+        p = t.points @ np.array([[c, -s], [s, c]])
+        assert p[:, 1].max() - p[:, 1].min() == pytest.approx(2 * a, rel=1e-3)  # peak to peak
+        assert p[-1, 0] - p[0, 0] == pytest.approx(t.params["periods"] * lam, rel=1e-9)
+        # a meander, not a coil: it never goes backwards along the progression
+        assert np.all(np.diff(p[:, 0]) >= -1e-9)
+        # the ideal path length: runs of (2A - lambda/2), semicircles of radius lambda/4
+        n = 2 * t.params["periods"]
+        ideal = n * (2 * a - lam / 2) + n * math.pi * lam / 4
+        assert t.length == pytest.approx(ideal, rel=2e-3)
+
+
+def test_smooth_curvature_is_bounded() -> None:
+    for seed in range(5):
+        t = T.draw("smooth", rng(seed))
+        seg = np.hypot(*np.diff(t.points, axis=0).T)
+        kappa = np.abs(turning(t.points)) / seg[:-1]
+        assert kappa.max() <= 1.0 / T.SMOOTH_MIN_RADIUS * 1.01
+        assert t.length == pytest.approx(t.params["length"], rel=1e-9)
+
+
+def test_sample_covers_every_family_and_never_a_held_out_target() -> None:
+    g = rng(11)
+    names = {T.sample(g).name for _ in range(300)}
+    assert names == set(T.FAMILIES)
+    assert not names & set(T.HELD_OUT)
+    only = {T.sample(g, ("arc", "zigzag")).name for _ in range(50)}
+    assert only == {"arc", "zigzag"}
+    with pytest.raises(ValueError):
+        T.sample(g, ())
+
+
+@pytest.mark.parametrize("name", T.HELD_OUT)
+def test_held_out_targets_are_fixed(name: str) -> None:
+    a, b = T.held_out(name), T.held_out(name)
+    np.testing.assert_array_equal(a.points, b.points)
+    np.testing.assert_array_equal(a.points[0], [0.0, 0.0])
+    assert a.name == name and 20.0 < a.length < 1000.0
+    assert name not in T.FAMILIES
+    # resolve ignores the generator for held-out names
+    g = rng(0)
+    state = g.bit_generator.state
+    np.testing.assert_array_equal(T.resolve(name, g).points, a.points)
+    assert g.bit_generator.state == state
+
+
+def test_paper_serpentine_is_the_papers_baseline() -> None:
+    t = T.held_out("paper_serpentine")
+    assert t.points[:, 1].max() - t.points[:, 1].min() == pytest.approx(60.0, rel=1e-3)
+    assert t.points[-1, 0] == pytest.approx(14.0)  # 2 periods of 7 along +x
+
+
+def test_resolve_accepts_names_targets_and_polylines() -> None:
+    g = rng(5)
+    assert T.resolve("arc", g).name == "arc"
+    t = T.held_out("jog")
+    assert T.resolve(t, g) is t
+    custom = T.resolve([[3.0, 4.0], [3.0, 4.0], [13.0, 4.0], [13.0, 14.0]], g)
+    assert custom.name == "custom"
+    np.testing.assert_array_equal(custom.points, [[0, 0], [10, 0], [10, 10]])  # dup dropped
+    assert custom.length == pytest.approx(20.0)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    ["nope", [[0.0, 0.0]], [[0, 0], [np.nan, 1]], [[0, 0, 0], [1, 1, 1]], [[1, 1], [1, 1]],
+     [[0, 0], [2e4, 0]], "straight_line", [["a", "b"], ["c", "d"]]],
+)  # fmt: skip
+def test_resolve_rejects_bad_targets(bad) -> None:
+    with pytest.raises(ValueError):
+        T.resolve(bad, rng())
+
+
+def test_resample_keeps_vertices_and_spacing() -> None:
+    pts = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 0.1]])
+    samples, s = T.resample(pts, 0.5)
+    assert np.hypot(*np.diff(samples, axis=0).T).max() <= 0.5 + 1e-12
+    for v in pts:
+        assert np.min(np.hypot(*(samples - v).T)) == 0.0
+    assert s[-1] == pytest.approx(3.1)
+    np.testing.assert_allclose(np.diff(s), np.hypot(*np.diff(samples, axis=0).T))
+
+
+def test_polyline_distances_match_a_dense_brute_force() -> None:
+    g = rng(4)
+    poly = np.cumsum(g.normal(size=(7, 2)) * 5.0, axis=0)
+    pts = g.uniform(-20, 20, size=(50, 2))
+    out = np.empty(len(pts))
+    T.polyline_distances(pts, poly, out)
+    dense, _ = T.resample(poly, 1e-3)
+    brute = np.min(np.hypot(*(pts[:, None, :] - dense[None, :, :]).transpose(2, 0, 1)), axis=1)
+    np.testing.assert_allclose(out, brute, atol=1e-3)
+    assert np.all(out <= brute + 1e-12)  # exact distances never exceed the sampled ones
+
+
+def test_mark_covered_flags_samples_within_tolerance() -> None:
+    samples = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    hit = np.zeros(4, dtype=bool)
+    T.mark_covered(samples, np.array([[1.0, 0.5], [3.0, 0.5]]), 0.5, hit)
+    assert hit.tolist() == [False, True, False, True]
+    T.mark_covered(samples, np.array([[0.0, 0.4]]), 0.5, hit)  # accumulates
+    assert hit.tolist() == [True, True, False, True]
+    T.mark_covered(samples, np.zeros((0, 2)), 0.5, hit)
+    assert hit.tolist() == [True, True, False, True]
+
+
+def test_patterns_measure_a_serpentine_target_as_drawn() -> None:
+    """The target's amplitude and wavelength follow the conventions of patterns.py."""
+    from cnt_env.patterns import MeasureOptions, measure
+
+    pts = T.serpentine_points(amplitude=20.0, wavelength=8.0, periods=6, heading=0.0)
+    m = measure(pts, MeasureOptions(transient_length=0.0), substrate="stepped")
+    assert m["amplitude"] == pytest.approx(20.0, rel=0.02)
+    assert m["wavelength"] == pytest.approx(8.0, rel=0.02)
