@@ -36,7 +36,8 @@ from cnt_env.rod.stepper import SimulationError
 ENV_ID = "CNTDeposit-v0"
 # small rod: dt = 0.05 Hbar = 1.5 tau, so control_interval = 15 tau is 10 physics steps
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
-             control_interval=15.0, reset_advance=2.0, pattern_every=10)  # fmt: skip
+             control_interval=15.0, reset_advance=2.0, pattern_every=10,
+             sim_options={"dt_factor": 0.05})  # fmt: skip
 REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
 
 # Warnings the checkers may raise that are not defects of this env, as (message
@@ -132,7 +133,10 @@ def test_defaults_are_the_paper_serpentine_baseline() -> None:
     p = env.params
     assert (p.Hbar, p.Ibar, p.kappa_c_bar, p.vbar) == (155.0, 300.0, 0.2, 0.037)
     assert env.substrate == "stepped" and env.vbar_max == 0.13
-    assert env.n_substeps == 30 and env.control_interval == pytest.approx(1.5 * 155.0)
+    # ENV_SIM_DEFAULTS: dt = 0.2 Hbar = 31 tau; 1.5 Hbar rounds to 8 whole steps
+    assert env.dt == pytest.approx(0.2 * 155.0)
+    assert env.n_substeps == 8 and env.control_interval == pytest.approx(8 * 0.2 * 155.0)
+    assert env.config.tail_length == 60.0 and env.config.initial_radius == 3.9
     assert env.warmup_length == 155.0
     assert env.observation_space.shape == (81,) and env.observation_space.dtype == np.float32
     assert np.all(np.isfinite(env.observation_space.low))
@@ -357,7 +361,8 @@ def test_a_real_newton_failure_ends_the_episode_cleanly(kw: dict) -> None:
     from cnt_env.rod.stepper import NewtonOptions
 
     env = make(kw, warmup_length=0.0,
-               sim_options={"newton": NewtonOptions(max_iter=1, max_halvings=0)})  # fmt: skip
+               sim_options={"newton": NewtonOptions(max_iter=1, max_halvings=0),
+                            "dt_factor": 0.05})  # fmt: skip
     obs, info = env.reset(seed=0)
     assert info["reset_advance"] == 0.0 and np.all(np.isfinite(obs))
     obs, reward, terminated, truncated, info = env.step(np.zeros(2, np.float32))
