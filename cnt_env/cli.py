@@ -10,6 +10,9 @@ and returns the exit code: 0 on success, 1 when a simulation or measurement fail
   (``cnt_env.plotting``), each with its resolved config next to it (``<file>.json``).
 * ``cnt-sim measure TRACE``: the same measurements for a saved trace.
 * ``cnt-sim demo``: a short coil run that writes ``runs/demo/coil.png``.
+* ``cnt-sim replay FILE --rrd OUT.rrd``: a saved trace (``run --out``) or a saved
+  episode (``cnt_env.replay.save_episode``) as a rerun recording (``cnt_env.replay``);
+  ``cnt-sim run --rrd`` records a run as it goes. rerun is an optional extra.
 * ``cnt-sim sweep``: a grid of runs in parallel, resumable, with plots (``cnt_env.sweep``).
 
 The simulator and matplotlib are imported only by the commands that need them, so
@@ -468,13 +471,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     png = _output_path(args.png, "--png")
     if out is not None and png is not None and out.resolve() == png.resolve():
         raise CliError("--out and --png name the same file")
+    rrd = _output_path(getattr(args, "rrd", None), "--rrd")
+    if rrd is not None and any(p is not None and p.resolve() == rrd.resolve() for p in (out, png)):
+        raise CliError("--rrd names the same file as --out or --png")
+    if rrd is not None:
+        _require_rerun()
 
     from cnt_env.rod.stepper import SimulationError
 
     show_bar = not args.json and sys.stderr.isatty()
     try:
         with progress_bar(show_bar, spec.deposit_length) as progress:
-            sim, stats = simulate(spec.sim_config, spec.deposit_length, spec.seed, progress)
+            if rrd is None:
+                sim, stats = simulate(spec.sim_config, spec.deposit_length, spec.seed, progress)
+            else:  # the same run, sampled into a rerun recording as it goes
+                from cnt_env.replay import record_run
+
+                sim, stats = record_run(spec.sim_config, spec.deposit_length, rrd,
+                                        seed=spec.seed, progress=progress,
+                                        run_config=spec.config_dict())  # fmt: skip
     except SimulationError as exc:
         raise CliError(str(exc), EXIT_FAILED) from exc
     trace, suspended = sim.trace(), sim.suspended_nodes.copy()
@@ -502,6 +517,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             plot_run(trace, suspended, measurement, png)
             write_config_json(png, resolved)
             written.append(png)
+        if rrd is not None:  # written by record_run
+            write_config_json(rrd, resolved)
+            written.append(rrd)
     except OSError as exc:
         raise CliError(f"cannot write output: {exc}", EXIT_FAILED) from exc
 
@@ -552,6 +570,55 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if measurement.get("error"):
         print(f"{PROG}: error: trace not measured: {measurement['error']}", file=sys.stderr)
         return EXIT_FAILED
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def _require_rerun() -> None:
+    """Fail before any work when the optional rerun extra is missing."""
+    from cnt_env.replay import import_rerun
+
+    try:
+        import_rerun()
+    except ImportError as exc:
+        raise CliError(str(exc), EXIT_FAILED) from exc
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """A saved trace or episode as a rerun recording (the kind from its ``format``)."""
+    from cnt_env import replay
+    from cnt_env.io import TRACE_FORMAT
+
+    rrd = _output_path(args.rrd, "--rrd")
+    assert rrd is not None
+    _require_rerun()
+    try:
+        kind = replay.file_format(args.file)
+    except replay.EpisodeFileError as exc:
+        raise CliError(str(exc)) from exc
+    try:
+        if kind == replay.EPISODE_FORMAT:
+            rid = replay.record_episode(args.file, rrd, recording_id=args.recording_id)
+        elif kind == TRACE_FORMAT:
+            saved = load_trace(args.file)
+            rid = replay.record_simulation(saved, rrd, recording_id=args.recording_id)
+        else:
+            raise CliError(
+                f"{args.file} is neither a cnt_env trace (`cnt-sim run --out`) nor a "
+                f"cnt_env episode file (format {kind!r})"
+            )
+    except (TraceFileError, replay.EpisodeFileError) as exc:
+        raise CliError(str(exc)) from exc
+    except OSError as exc:
+        raise CliError(f"cannot write {rrd}: {exc}", EXIT_FAILED) from exc
+    result = {"file": str(args.file), "kind": kind, "rrd": str(rrd), "recording_id": rid}
+    if args.json:
+        _print_json(result)
+    else:
+        print(f"wrote {rrd} (recording {rid}, from the {kind} file {args.file}); "
+              f"open it with `rerun {rrd}`")  # fmt: skip
     return EXIT_OK
 
 
@@ -674,6 +741,11 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
     o.add_argument("--out", metavar="TRACE.npz", help="save the trace (cnt_env.io format)")
     o.add_argument("--png", metavar="FIG.png", help="plot the trace and the suspended rod")
     o.add_argument(
+        "--rrd",
+        metavar="RUN.rrd",
+        help="record the run for the rerun viewer (needs the rerun extra)",
+    )
+    o.add_argument(
         "--json", action="store_true", help="print one JSON object on stdout and nothing else"
     )
 
@@ -713,6 +785,22 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", action="store_true", help="print one JSON object on stdout and nothing else"
     )
     measure.set_defaults(func=cmd_measure)
+
+    replay = sub.add_parser(
+        "replay",
+        help="turn a saved trace or episode into a rerun recording",
+        allow_abbrev=False,
+        description="Write a rerun recording (.rrd) of a trace saved by `cnt-sim run --out` "
+        "or of an episode saved by cnt_env.replay.save_episode; open it with `rerun FILE.rrd`. "
+        'Needs the rerun extra: pip install -e ".[rerun]".',
+    )
+    replay.add_argument("file", help="trace.npz or episode.npz (told apart by their format)")
+    replay.add_argument("--rrd", required=True, metavar="OUT.rrd", help="recording to write")
+    replay.add_argument("--recording-id", default=None, help="default: the file's own")
+    replay.add_argument(
+        "--json", action="store_true", help="print one JSON object on stdout and nothing else"
+    )
+    replay.set_defaults(func=cmd_replay)
 
     demo = sub.add_parser("demo", help="run the main job: a small coil deposition")
     demo.add_argument(
