@@ -56,7 +56,7 @@ class ContactOptions:
     beta0_min: float = 0.005
     sqrt_clamp: float = 0.05
     event_tol: float = 0.01
-    max_event_iterations: int = 8
+    max_event_iterations: int = 30
 
     def __post_init__(self) -> None:
         if self.mode not in CONTACT_MODES:
@@ -189,6 +189,7 @@ class DepositionSim:
         self.vdw_work = 0.0
         self.sticking_loss = 0.0  # kinetic energy discarded by sticking nodes (e_v L_vb)
         self.events = 0
+        self.event_failures = 0  # touchdown searches that did not land within tol
         self.immediate_deposits = 0
         for i in range(n_dep):
             self._deposit(i)
@@ -345,23 +346,44 @@ class DepositionSim:
         taken = dt
         tol = self._landing_tol()
         if cfg.mode == "event" and rod.q[k_y] < -tol:
-            # touchdown inside the step: regula falsi on the step length, each trial taken
-            # from the step start, until the contact node lands within tol of y = 0
+            # touchdown inside the step: Illinois (modified regula falsi) on the step
+            # length, each trial taken from the step start, until the contact node lands
+            # within tol of y = 0. If the search does not converge, the step is retaken to
+            # the last time the node was still above the substrate (never accept a deep
+            # penetration: its kinetic energy would be discarded by sticking).
             self.events += 1
             lo, y_lo, hi, y_hi = 0.0, y_before, dt, rod.q[k_y]
+            side = 0
+            landed = False
             for _ in range(cfg.max_event_iterations):
                 trial = lo + (hi - lo) * y_lo / (y_lo - y_hi)
-                trial = min(max(trial, lo + 0.02 * (hi - lo)), hi - 0.02 * (hi - lo))
+                trial = min(max(trial, lo + 0.01 * (hi - lo)), hi - 0.01 * (hi - lo))
                 self._restore_light(state)
                 rod.step(trial)
                 taken = trial
                 y = rod.q[k_y]
                 if abs(y) <= tol:
+                    landed = True
                     break
                 if y > 0:
                     lo, y_lo = trial, y
+                    if side == 1:
+                        y_hi *= 0.5
+                    side = 1
                 else:
                     hi, y_hi = trial, y
+                    if side == -1:
+                        y_lo *= 0.5
+                    side = -1
+            if not landed:
+                self.event_failures += 1
+                self._restore_light(state)
+                if lo > 0.0:
+                    rod.step(lo)
+                    taken = lo
+                else:  # even the shortest step overshoots: take it and project
+                    rod.step(hi)
+                    taken = hi
         y_after = rod.q[k_y]
         # vdW work over the step (trapezoid in y): the energy the adhesion released
         self.vdw_work += 0.5 * (f_before + self._vdw_force(y_after)) * (y_after - y_before)
@@ -439,6 +461,7 @@ class DepositionSim:
         return {
             "time": self.time, "steps": r.steps, "newton_iterations": r.newton_iterations,
             "halvings": r.halvings, "events": self.events,
+            "event_failures": self.event_failures,
             "immediate_deposits": self.immediate_deposits, "n_nodes": r.n_nodes,
             "deposited_length": self.deposited_length, "vdw_work": self.vdw_work,
             "sticking_loss": self.sticking_loss, "snaps": self.snaps,
@@ -452,6 +475,7 @@ class DepositionSim:
             "snaps": self.snaps,
             "trace": self._trace[: self._n_archived].copy(), "time": self.time,
             "vdw_work": self.vdw_work, "events": self.events, "sticking_loss": self.sticking_loss,
+            "event_failures": self.event_failures,
             "immediate_deposits": self.immediate_deposits,
         }  # fmt: skip
 
@@ -469,6 +493,7 @@ class DepositionSim:
         self.vdw_work = snap["vdw_work"]
         self.sticking_loss = snap["sticking_loss"]
         self.events = snap["events"]
+        self.event_failures = snap["event_failures"]
         self.immediate_deposits = snap["immediate_deposits"]
 
 

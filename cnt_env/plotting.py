@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .patterns import arc_length, fit_circle
+from .patterns import MeasureOptions, arc_length, fit_circle, uturns
 
-__all__ = ["last_turn_circle", "plot_run"]
+__all__ = ["last_turn_circle", "plot_run", "uturn_markers"]
 
 # Circles drawn on the top view: the median of this many one-turn windows, a quarter
 # turn apart, ending at the end of the trace.
@@ -54,6 +54,33 @@ def last_turn_circle(trace: Any, radius: float) -> tuple[float, float, float] | 
     return float(cx), float(cz), float(r)
 
 
+def uturn_markers(
+    trace: Any, measurement: Mapping[str, Any] | None, options: MeasureOptions | None = None
+) -> dict[str, Any] | None:
+    """The U-turns to mark on a stepped run's trace (:func:`patterns.uturns`), or None.
+
+    Only for a measurement on the ``"stepped"`` substrate: there U-turns are the
+    serpentine's turning points (on a flat one they would only mark a coil's wobble).
+    ``options`` default to the measurement's transient with the other measurement
+    defaults, i.e. what ``cnt-sim run`` measured with. None when the trace is too
+    short to measure.
+    """
+    measurement = measurement or {}
+    if measurement.get("substrate") != "stepped":
+        return None
+    if options is None:
+        transient = measurement.get("transient_length")
+        options = (
+            MeasureOptions()
+            if transient is None
+            else MeasureOptions(transient_length=float(transient))
+        )
+    try:
+        return uturns(trace, options)
+    except ValueError:
+        return None
+
+
 def _rod_plane_coordinate(rod: np.ndarray) -> tuple[np.ndarray, str]:
     """Horizontal coordinate of the rod's nodes in its own (vertical) plane, and a label."""
     horizontal = rod[:, [0, 2]] - rod[0, [0, 2]]
@@ -71,12 +98,16 @@ def plot_run(
     path: str | os.PathLike[str],
     *,
     title: str | None = None,
+    options: MeasureOptions | None = None,
 ) -> Path:
     """Write a PNG of a run: top view of the trace and side view of the suspended rod.
 
     * Left: the trace in the substrate plane (x, z), equal axes, with the median
       circle of the last one-turn windows dashed (:func:`last_turn_circle`) when a
-      coil radius was measured; the start-up transient (not measured) in grey.
+      coil radius was measured; the start-up transient (not measured) in grey. On
+      the stepped substrate the U-turns are marked (:func:`uturn_markers`, with
+      ``options`` or the measurement's transient), maxima of z as up-triangles and
+      minima as down-triangles, and the title gives amplitude and wavelength.
     * Right: the suspended rod, height y against its horizontal position in its
       own plane (the axes are not to scale: the rod is tall and nearly straight).
 
@@ -123,6 +154,21 @@ def plot_run(
             color="k",
             label=f"last-turn fit, R = {r:.2f}",
         )
+    marks = uturn_markers(trace, measurement, options) if trace.shape[0] >= 3 else None
+    if marks is not None and len(marks["indices"]):
+        idx, sides = marks["indices"], marks["sides"]
+        for sign, marker, word in ((1, "^", "max z"), (-1, "v", "min z")):
+            at = idx[sides == sign]
+            top.plot(
+                trace[at, 0],
+                trace[at, 2],
+                marker,
+                ms=5,
+                mfc="none",
+                mew=1.0,
+                color="tab:red" if sign > 0 else "tab:purple",
+                label=f"U-turn, {word} ({at.size})",
+            )
     top.set_aspect("equal", adjustable="datalim")
     top.set_xlabel("x (L_vb)")
     top.set_ylabel("z (L_vb)")
@@ -146,6 +192,13 @@ def plot_run(
     side.set_title("side view: suspended rod (axes not to scale)")
 
     radius_text = f"R = {radius:.3g} L_vb" if math.isfinite(radius) else "no coil radius"
+    if measurement.get("substrate") == "stepped":
+        amplitude = float(measurement.get("amplitude") or math.nan)
+        wavelength = float(measurement.get("wavelength") or math.nan)
+        radius_text = (
+            f"amplitude {amplitude:.3g}, wavelength {wavelength:.3g} L_vb, "
+            f"{measurement.get('n_uturns', 0)} U-turns"
+        )
     fig.suptitle(title or f"pattern: {pattern}, {radius_text}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,258 @@
+"""``cnt-sim sweep`` (cnt_env.sweep) and the U-turn markers of ``plot_run``.
+
+The sweeps are tiny (coil preset, H = 30 L_vb, 6 L_vb deposited, no transient): about
+a second each once numba has compiled. ``run_point`` is wrapped to count (or fail)
+the points that run in this process (``--jobs 1``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cnt_env import cli, sweep
+from cnt_env.plotting import plot_run, uturn_markers
+from cnt_env.rod.stepper import SimulationError
+
+TINY = ["--preset", "coil", "--Hbar", "30", "--deposit", "6", "--transient", "0"]
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _call(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = cli.main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+def _summary(stdout: str) -> dict:
+    lines = stdout.splitlines()
+    assert len(lines) == 1, stdout
+    return json.loads(lines[0])
+
+
+@pytest.fixture
+def counted(monkeypatch: pytest.MonkeyPatch) -> list:
+    """Points run in this process, in order: ``run_point`` records each one."""
+    calls: list = []
+    original = sweep.run_point
+
+    def counting(point: sweep.SweepPoint) -> dict:
+        calls.append(dict(point.values))
+        return original(point)
+
+    monkeypatch.setattr(sweep, "run_point", counting)
+    return calls
+
+
+# --------------------------------------------------------------------------- grid input
+
+
+def test_param_names_map_to_groups() -> None:
+    assert sweep.resolve_param("kappa-c") == "kappa_c_bar"
+    assert sweep.resolve_param("kappa_c_bar") == "kappa_c_bar"
+    assert sweep.resolve_param("delta") == "delta_bar"
+    assert sweep.resolve_param("hbar") == "Hbar"
+    assert sweep.resolve_param("ks-over-ev") == "ks_over_ev"
+    assert sweep.parse_range("0.01:0.13:3", "--range") == pytest.approx([0.01, 0.07, 0.13])
+    assert sweep.parse_range("1:100:3:log", "--range") == pytest.approx([1.0, 10.0, 100.0])
+
+
+@pytest.mark.parametrize(
+    ("grid", "names"),
+    [
+        (["--param", "vbar", "--values", "nan"], ["point 1 of 1", "--vbar", "vbar"]),
+        (["--param", "Hbar", "--values=100,-5"], ["point 2 of 2", "--Hbar", "Hbar"]),
+        (["--param", "Ibar", "--values", "100", "--Hbar=-5"], ["point 1 of 1", "Hbar"]),
+        (["--param", "foo", "--values", "1"], ["unknown sweep parameter", "foo"]),
+        (["--param", "vbar", "--values", "0.1,,0.2"], ["--values"]),
+        (["--param", "vbar", "--values", "0.1,x"], ["--values", "'x'"]),
+        (["--param", "vbar", "--range", "0:1:0"], ["--range", "n must be >= 1"]),
+        (["--param", "vbar"], ["--values or --range"]),
+        (["--values", "1,2"], ["without --param"]),
+        (
+            ["--param", "vbar", "--values", "0.1", "--param2", "vbar", "--values2", "1"],
+            ["both vbar"],
+        ),
+        (
+            ["--param", "Ibar", "--values", "100", "--param2", "sigma", "--values2", "0"],
+            ["point 1 of 1", "sigma"],
+        ),
+    ],
+)
+def test_invalid_grid_exits_2_before_running(
+    grid: list[str], names: list[str], tmp_path: Path, counted: list
+) -> None:
+    out = tmp_path / "sweep.csv"
+    start = time.perf_counter()
+    code, stdout, stderr = _call(["sweep", *TINY, *grid, "--out", str(out), "--json"])
+    assert time.perf_counter() - start < 10.0
+    assert code == 2, stderr
+    assert stdout == ""
+    assert "cnt-sim: error: " in stderr
+    for name in names:
+        assert name in stderr
+    assert counted == []
+    assert not out.exists()
+
+
+# --------------------------------------------------------------------------- sweeps
+
+
+def test_1d_sweep_in_parallel_then_resumes(tmp_path: Path, counted: list) -> None:
+    out = tmp_path / "res" / "sweep.csv"
+    grid = ["--param", "Ibar", "--values", "100,200"]
+    code, stdout, stderr = _call(
+        ["sweep", *TINY, *grid, "--jobs", "2", "--out", str(out), "--json"]
+    )
+    assert code == 0, stderr
+    summary = _summary(stdout)
+    assert summary["n_run"] == 2 and summary["n_skipped"] == 0 and summary["n_failed"] == 0
+    assert counted == []  # --jobs 2: the points ran in worker processes
+
+    header, rows = sweep.read_rows(out)
+    assert header is not None
+    assert header[:2] == ["Ibar", "seed"] and header[-1] == "config_hash"
+    assert set(sweep.RESULT_COLUMNS) <= set(header)
+    assert sorted(r["Ibar"] for r in rows) == [100.0, 200.0]
+    for row in rows:
+        assert row["failure"] == "" and row["pattern"]
+        assert row["seed"] == 0 and row["deposited_length"] >= 6.0
+        assert row["steps"] > 0 and row["wall_time_s"] > 0
+        assert row["config_hash"] == summary["config_hash"]
+    resolved = json.loads(Path(f"{out}.json").read_text())
+    assert resolved["sweep"]["params"] == ["Ibar"] and resolved["params"]["Hbar"] == 30.0
+    assert resolved["config_hash"] == summary["config_hash"]
+    curves = out.parent / "sweep_curves.png"
+    assert curves.read_bytes()[:8] == PNG_MAGIC
+
+    # the same sweep again: nothing runs, the CSV is unchanged
+    before = out.read_bytes()
+    code, stdout, stderr = _call(
+        ["sweep", *TINY, *grid, "--jobs", "2", "--out", str(out), "--json"]
+    )
+    assert code == 0, stderr
+    again = _summary(stdout)
+    assert again["n_run"] == 0 and again["n_skipped"] == 2
+    assert out.read_bytes() == before
+    assert [r["wall_time_s"] for r in again["rows"]] == [r["wall_time_s"] for r in summary["rows"]]
+
+    # a grown grid runs only the new point (in this process, --jobs 1)
+    grown = ["--param", "Ibar", "--values", "100,200,400"]
+    code, stdout, stderr = _call(["sweep", *TINY, *grown, "--out", str(out), "--json"])
+    assert code == 0, stderr
+    assert counted == [{"Ibar": 400.0}]
+    assert len(sweep.read_rows(out)[1]) == 3
+
+    # a changed base config is a different sweep: its points run again
+    counted.clear()
+    code, stdout, stderr = _call(
+        ["sweep", *TINY, "--Ibar", "1", *grid, "--dt", "1.0", "--out", str(out), "--json"]
+    )
+    assert code == 0, stderr
+    assert len(counted) == 2
+    assert len({r["config_hash"] for r in sweep.read_rows(out)[1]}) == 2
+
+
+def test_2d_grid_writes_a_phase_diagram(tmp_path: Path) -> None:
+    out = tmp_path / "grid.csv"
+    plots = tmp_path / "plots"
+    grid = ["--param", "Ibar", "--values", "100,300", "--param2", "vbar", "--values2", "0,0.05"]
+    code, stdout, stderr = _call(
+        ["sweep", *TINY, *grid, "--out", str(out), "--plots", str(plots), "--seed-per-point"]
+    )
+    assert code == 0, stderr
+    assert "4 points over Ibar x vbar" in stdout
+    _, rows = sweep.read_rows(out)
+    assert {(r["Ibar"], r["vbar"]) for r in rows} == {
+        (100.0, 0.0),
+        (100.0, 0.05),
+        (300.0, 0.0),
+        (300.0, 0.05),
+    }
+    assert sorted(r["seed"] for r in rows) == [0, 1, 2, 3]
+    for name in ("grid_curves.png", "grid_phase.png"):
+        assert (plots / name).read_bytes()[:8] == PNG_MAGIC
+
+
+def test_failed_point_is_recorded_not_fatal(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[float] = []
+    original = sweep.run_point
+
+    def flaky(point: sweep.SweepPoint) -> dict:
+        ibar = dict(point.values)["Ibar"]
+        calls.append(ibar)
+        if ibar == 200.0:
+            raise SimulationError("Newton did not converge", 12, 3.5, 0.1, {})
+        return original(point)
+
+    monkeypatch.setattr(sweep, "run_point", flaky)
+    out = tmp_path / "sweep.csv"
+    argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100,200", "--out", str(out)]
+    code, stdout, stderr = _call([*argv, "--json"])
+    assert code == 1, stderr
+    summary = _summary(stdout)
+    assert summary["n_run"] == 2 and summary["n_failed"] == 1
+    _, rows = sweep.read_rows(out)
+    by_ibar = {r["Ibar"]: r for r in rows}
+    assert by_ibar[100.0]["failure"] == "" and by_ibar[100.0]["pattern"]
+    failed = by_ibar[200.0]
+    assert failed["failure"].startswith("SimulationError: ")
+    assert "Newton did not converge" in failed["failure"]
+    assert failed["pattern"] == "" and math.isnan(failed["amplitude"])
+    assert (tmp_path / "sweep_curves.png").exists()
+
+    # resumed: the failure is kept, not re-run; --retry-failed runs it again
+    calls.clear()
+    assert _call([*argv, "--json"])[0] == 1
+    assert calls == []
+    assert _call([*argv, "--json", "--retry-failed"])[0] == 1
+    assert calls == [200.0]
+
+
+def test_ray_backend_runs_the_same_points(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    out = tmp_path / "ray.csv"
+    argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100,200", "--out", str(out)]
+    code, stdout, stderr = _call([*argv, "--backend", "ray", "--jobs", "2", "--json"])
+    assert code == 0, stderr
+    summary = _summary(stdout)
+    assert summary["n_run"] == 2 and summary["n_failed"] == 0
+    _, rows = sweep.read_rows(out)
+    assert sorted(r["Ibar"] for r in rows) == [100.0, 200.0]
+    assert all(r["pattern"] and r["steps"] > 0 for r in rows)
+    # the same points in this process give the same rows: the backend changes nothing
+    local = tmp_path / "local.csv"
+    local_argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100,200", "--out", str(local)]
+    assert _call([*local_argv, "--json"])[0] == 0
+    _, local_rows = sweep.read_rows(local)
+    key = ("Ibar", "pattern", "steps", "newton_iterations", "sim_time", "config_hash")
+    assert sorted(tuple(r[k] for k in key) for r in rows) == sorted(
+        tuple(r[k] for k in key) for r in local_rows
+    )
+
+
+# --------------------------------------------------------------------------- U-turns
+
+
+def test_stepped_run_figure_marks_the_uturns(tmp_path: Path) -> None:
+    # a meander along x with amplitude 10 and wavelength 8: U-turns at z = +-10
+    s = np.linspace(0.0, 6.0 * 2.0 * math.pi, 1200)
+    trace = np.column_stack([8.0 * s / (2.0 * math.pi), np.zeros_like(s), 10.0 * np.sin(s)])
+    measurement = {"substrate": "stepped", "transient_length": 0.0, "pattern": "x"}
+    marks = uturn_markers(trace, measurement)
+    assert marks is not None
+    assert len(marks["indices"]) == 12
+    assert np.allclose(np.abs(trace[marks["indices"], 2]), 10.0, atol=0.01)
+    assert uturn_markers(trace, {**measurement, "substrate": "flat"}) is None
+    png = plot_run(trace, None, measurement, tmp_path / "meander.png")
+    assert png.read_bytes()[:8] == PNG_MAGIC
