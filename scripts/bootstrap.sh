@@ -11,13 +11,14 @@
 # rebuilt only when pyproject.toml or this script changes.
 #
 # Environment: PYTHON (interpreter to create the venv with), VENV (default
-# .venv), TORCH_REQ (default torch==2.13.0), EXTRAS (default dev).
+# .venv), TORCH_REQ (default torch==2.13.0), EXTRAS (default dev,rerun: the demo writes
+# a rerun recording and the replay tests read one back).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 VENV=${VENV:-.venv}
 TORCH_REQ=${TORCH_REQ:-torch==2.13.0}
-EXTRAS=${EXTRAS:-dev}
+EXTRAS=${EXTRAS:-dev,rerun}
 STAMP="$VENV/.installed"
 CUDA_PATTERN='^(nvidia|cuda)[-_]'
 
