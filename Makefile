@@ -26,8 +26,15 @@ $(STAMP): pyproject.toml scripts/bootstrap.sh
 
 venv: $(STAMP)
 
+# The main job (<= 10 min on 2 cores): simulate a serpentine (figure, trace, rerun
+# recording), then train PPO briefly, evaluate every policy against the baselines on
+# held-out targets, and write the table, plots and rerun recordings (training/demo.py).
+DEMO_OUT := runs/demo
 demo: $(STAMP)
-	$(VENV)/bin/cnt-sim demo
+	$(VENV)/bin/cnt-sim run --preset serpentine --deposit 400 --dt 31 \
+		--out $(DEMO_OUT)/serpentine.npz --png $(DEMO_OUT)/serpentine.png --rrd $(DEMO_OUT)/serpentine.rrd
+	$(VENV)/bin/cnt-demo --budget-minutes 8 --out $(DEMO_OUT)
+	@echo "demo outputs in $(DEMO_OUT): serpentine.png, results/, rrd/ (open with: rerun FILE.rrd)"
 
 # pytest exits 5 when it collects no test; that must fail, not pass silently.
 define run_pytest

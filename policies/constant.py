@@ -1,0 +1,129 @@
+"""The best constant flow per target, by a small grid search over speed and direction.
+
+A constant flow lays the same trace whatever the target is (the target only places the
+scoring, and the reset draws the same random advance for the same seed when the target
+is given by name). So the search simulates each flow of the grid once per seed, against
+a target it never reaches (no early termination), and scores the recorded trace against
+every target afterwards with :func:`score_trace`: the env's agreement score Φ
+(cnt_env/env.py, "Rewards") evaluated on the final trace, cut where the target's end
+point was first covered (the env would have terminated there). Selection uses this
+offline score on the search seeds; reported numbers come from fresh env rollouts
+(training/evaluate.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cnt_env import targets as targets_mod
+from cnt_env.env import COVERAGE_SPACING
+
+from .base import action_from_flow
+
+__all__ = ["ConstantTrace", "grid", "record_constant", "score_trace", "search"]
+
+#: A straight target 3000 L_vb long: never completed, so the episode runs to its limit.
+UNREACHABLE = np.array([[0.0, 0.0], [3000.0, 0.0]])
+
+
+@dataclass
+class ConstantTrace:
+    """One constant-flow episode: the trace laid since reset, (n, 2) (x, z) relative to
+    the contact point at reset, and the number of nodes laid after each control step."""
+
+    vbar: float
+    phi: float
+    seed: int
+    trace: np.ndarray
+    n_after_step: np.ndarray
+
+
+def grid(speeds: Sequence[float], n_directions: int) -> list[tuple[float, float]]:
+    """Flows (vbar, phi): every speed at ``n_directions`` evenly spaced angles."""
+    phis = [2.0 * math.pi * k / n_directions - math.pi for k in range(n_directions)]
+    return [(float(v), float(p)) for v in speeds for p in phis]
+
+
+def record_constant(env, vbar: float, phi: float, seed: int, max_steps: int) -> ConstantTrace:
+    """Run ``env`` (a CNTDeposit-v0, unwrapped or not) with one flow for ``max_steps``."""
+    base = env.unwrapped
+    action = action_from_flow(vbar, phi, base.vbar_max)
+    env.reset(seed=seed, options={"target": UNREACHABLE})
+    n_after = []
+    for _ in range(max_steps):
+        _, _, terminated, truncated, info = env.step(action)
+        n_after.append(info["n_laid"])
+        if terminated or truncated:
+            break
+    trace = base.sim.trace()
+    n0 = base.episode_start
+    origin = trace[n0 - 1, [0, 2]]
+    return ConstantTrace(vbar, phi, seed, trace[n0:, [0, 2]] - origin, np.array(n_after))
+
+
+def score_trace(
+    trace: np.ndarray,
+    target: np.ndarray,
+    tolerance: float,
+    weights: Sequence[float] = (0.5, 0.25, 0.25),
+    n_after_step: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Φ = w_c C + w_p P + w_g G of ``trace`` (n, 2) against ``target`` (m, 2), both
+    relative to the contact point at reset (cnt_env/env.py, "Rewards"). With
+    ``n_after_step`` the trace is cut at the first step whose trace covers the end point."""
+    samples, s = targets_mod.resample(target, min(COVERAGE_SPACING, 0.5 * tolerance))
+    if n_after_step is not None and len(trace):
+        end = np.ascontiguousarray(samples[-1:])
+        for n in n_after_step:
+            hit = np.zeros(1, dtype=np.bool_)
+            targets_mod.mark_covered(end, np.ascontiguousarray(trace[:n]), tolerance, hit)
+            if hit[0]:
+                trace = trace[:n]
+                break
+    w = np.zeros(len(s))
+    w[:-1] += 0.5 * np.diff(s)
+    w[1:] += 0.5 * np.diff(s)
+    w /= w.sum()
+    pts = np.ascontiguousarray(trace, dtype=np.float64)
+    covered = np.zeros(len(samples), dtype=np.bool_)
+    targets_mod.mark_covered(samples, pts, tolerance, covered)
+    d = np.empty(len(pts))
+    targets_mod.polyline_distances(pts, np.ascontiguousarray(target), d)
+    c = float(w @ covered)
+    p = float(np.mean(d <= tolerance)) if len(pts) else 0.0
+    hit = np.flatnonzero(covered)
+    g = float(s[hit[-1]] / s[-1]) if hit.size else 0.0
+    wc, wp, wg = weights
+    return {"score": wc * c + wp * p + wg * g, "coverage": c, "precision": p, "progress": g}
+
+
+def search(
+    traces: Iterable[ConstantTrace],
+    target_names: Sequence[str],
+    tolerance: float,
+    weights: Sequence[float] = (0.5, 0.25, 0.25),
+) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
+    """Best flow per target by mean offline score over seeds.
+
+    Returns ``(best, rows)``: ``best[target] = {"vbar", "phi", "score"}`` and one row
+    per (target, flow) with the mean score terms."""
+    traces = list(traces)
+    by_flow: dict[tuple[float, float], list[ConstantTrace]] = {}
+    for t in traces:
+        by_flow.setdefault((t.vbar, t.phi), []).append(t)
+    rows: list[dict[str, Any]] = []
+    best: dict[str, dict[str, Any]] = {}
+    for name in target_names:
+        pts = targets_mod.held_out(name).points
+        for (vbar, phi), group in by_flow.items():
+            terms = [score_trace(t.trace, pts, tolerance, weights, t.n_after_step) for t in group]
+            mean: Mapping[str, float] = {k: float(np.mean([x[k] for x in terms])) for k in terms[0]}
+            rows.append({"target": name, "vbar": vbar, "phi": phi, **mean})
+            if name not in best or mean["score"] > best[name]["score"]:
+                best[name] = {"vbar": vbar, "phi": phi, "score": mean["score"]}
+    return best, rows

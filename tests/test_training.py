@@ -1,0 +1,94 @@
+"""Training and evaluation: a tiny seeded PPO run is deterministic, and evaluate runs on
+one held-out target with the pretrained models and writes the table.
+
+Training runs on the small rod of tests/test_env.py (SMALL); evaluation needs the
+default physics (the pretrained models' observation statistics) but only a few steps.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cnt_env import warmstart
+from policies import PRETRAINED_DIR, load_policy
+
+SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
+             control_interval=15.0, reset_advance=2.0, pattern_every=0,
+             sim_options={"dt_factor": 0.05})  # fmt: skip
+RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cache(tmp_path_factory: pytest.TempPathFactory):
+    """Warm states go to a temporary cache, also in worker processes."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
+        yield
+
+
+def _tiny_config() -> dict:
+    return {
+        "n_timesteps": 128, "policy": "MlpPolicy", "n_envs": 1, "vec_env": "dummy",
+        "normalize": {"norm_obs": True, "norm_reward": True}, "max_episode_steps": 30,
+        "env_kwargs": SMALL, "n_steps": 64, "batch_size": 32, "n_epochs": 1,
+        "policy_kwargs": {"net_arch": [16, 16]},
+    }  # fmt: skip
+
+
+def _actions(model_path: Path) -> np.ndarray:
+    from training.common import make_env
+
+    policy = load_policy(model_path)
+    env = make_env(SMALL, 30)
+    obs, _ = env.reset(seed=3, options={"target": "jog"})
+    out = []
+    for _ in range(8):
+        a = policy.act(obs)
+        out.append(a)
+        obs, *_ = env.step(a)
+    env.close()
+    return np.array(out)
+
+
+def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
+    from training.train import train
+
+    paths = [
+        train("ppo", _tiny_config(), tmp_path / f"run{i}", seed=seed, progress_bar=False)
+        for i, seed in enumerate((7, 7, 8))
+    ]
+    for p in paths:
+        assert p.is_file() and p.with_name("ppo_vecnormalize.pkl").is_file()
+        assert (p.parent / "config.yml").is_file()
+    a, b, c = (_actions(p) for p in paths)
+    assert np.array_equal(a, b), "same seed must give the same actions"
+    assert not np.array_equal(a, c), "another seed should give other actions"
+    assert np.all(np.abs(a) <= 1.0)
+
+
+@pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
+def test_evaluate_one_target_with_pretrained_models(tmp_path: Path) -> None:
+    from training.evaluate import ALL_POLICIES, evaluate
+
+    config = {"max_episode_steps": 4, "env_kwargs": {"pattern_every": 0}}
+    table = evaluate(list(ALL_POLICIES), ["jog"], [0, 1, 2], config, tmp_path,
+                     constant_from=RESULTS / "constant_best.json", jobs=2)  # fmt: skip
+    overall = {r["policy"]: r for r in table if r["target"] == "ALL"}
+    assert set(overall) == set(ALL_POLICIES)
+    assert overall["random"]["normalized_score"] == pytest.approx(0.0)
+    with (tmp_path / "results.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["policy"] for r in rows} == set(ALL_POLICIES)
+    assert {"score_mean", "score_std", "coverage_mean", "normalized_score"} <= set(rows[0])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary) == {"policies", "targets", "seeds"}
+    assert summary["targets"] == ["jog"] and summary["seeds"] == [0, 1, 2]
+    for p in ALL_POLICIES:
+        s = summary["policies"][p]
+        assert set(s) == {"score_mean", "score_std"} and 0.0 <= s["score_mean"] <= 1.0
+    assert (tmp_path / "traces_jog.png").is_file()

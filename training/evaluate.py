@@ -1,0 +1,545 @@
+"""Evaluate every policy on the held-out targets (``cnt-evaluate``).
+
+    cnt-evaluate [--policies random,constant,scripted,ppo,sac] [--targets all]
+                 [--seeds 0,1,2] [--models policies/pretrained] [--runs DIR ...]
+                 [--config training/configs/ppo.yml] [--constant-from FILE]
+                 [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
+
+For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 with the
+env settings of ``--config`` (the ones the models were trained with) and writes, in
+``--out``:
+
+* ``episodes.csv``: one row per episode (final score Φ, its terms, mean distance,
+  length laid, steps, success, failure, wall time);
+* ``results.csv``: per policy and target, and over all targets (``target = ALL``):
+  mean ± std over seeds of the score and its terms, and the normalised score
+  (score - random) / (1 - random) (best possible score = 1). The ``ALL`` row takes,
+  per seed, the mean over targets, then mean ± std over seeds;
+* ``results.md``: the same as Markdown tables (for the README);
+* ``summary.json``: ``{"policies": {name: {"score_mean", "score_std"}}, "targets",
+  "seeds"}`` (the ``ALL`` rows);
+* ``constant_grid.csv`` and ``constant_best.json``: the constant-flow grid search
+  (policies/constant.py), unless ``--constant-from`` gives a previous ``constant_best.json``;
+* ``traces_<target>.png`` (and ``traces.png``, all targets): the trace laid by each
+  policy (first seed) over the target; ``learning_curves.png`` from the run directories'
+  ``evaluations.npz`` (``--runs``).
+
+``--save-episodes DIR`` saves every episode with :class:`cnt_env.replay.EpisodeSaver`
+(``cnt_env.episode`` npz files); ``--rrd DIR`` also writes a rerun recording of each
+policy's first-seed episode per target (skipped with a message if rerun is missing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import multiprocessing as mp
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cnt_env import targets as targets_mod
+
+from .common import CONFIG_DIR, env_settings, limit_threads, load_config, make_env
+
+__all__ = ["ALL_POLICIES", "evaluate", "main"]
+
+ALL_POLICIES = ("random", "constant", "scripted", "ppo", "sac")
+#: Policies that need no model; any other name is a model ``<models>/<name>.zip`` whose
+#: name contains its algorithm (ppo.zip, sac.zip, ppo_residual.zip).
+BASELINES = ("random", "constant", "scripted")
+TERMS = ("score", "coverage", "precision", "progress", "mean_distance")
+#: Grid of the constant-flow search: speeds (e_v / (mu H)) and number of directions.
+CONSTANT_SPEEDS = (0.037, 0.08, 0.13)
+CONSTANT_DIRECTIONS = 8
+#: Seeds of the constant-flow search, apart from the evaluation seeds.
+CONSTANT_SEARCH_SEEDS = (100,)
+PRETRAINED = Path(__file__).resolve().parents[1] / "policies" / "pretrained"
+COLORS = {"random": "0.6", "constant": "tab:orange", "scripted": "tab:green",
+          "ppo": "tab:blue", "sac": "tab:purple", "ppo_residual": "tab:cyan",
+          "ppo_long": "tab:red"}  # fmt: skip
+
+
+# ---- one episode (runs in a worker process) ---------------------------------------------
+
+
+def _make_policy(spec: dict[str, Any], env):
+    from policies import ConstantPolicy, RandomPolicy, ScriptedPolicy, load_policy
+
+    kind = spec["kind"]
+    if kind == "random":
+        return RandomPolicy()
+    if kind == "constant":
+        return ConstantPolicy(spec["vbar"], spec["phi"], env.unwrapped.vbar_max)
+    if kind == "scripted":
+        return ScriptedPolicy.from_env(env)
+    return load_policy(spec["model"])
+
+
+def run_episode(job: dict[str, Any]) -> dict[str, Any]:
+    """One episode of ``job`` = {policy, spec, target, seed, env_kwargs, max_steps,
+    save_dir}; returns the final metrics and the trace."""
+    limit_threads()
+    env = make_env(job["env_kwargs"], job["max_steps"])
+    if job.get("save_dir"):
+        from cnt_env.replay import EpisodeSaver
+
+        env = EpisodeSaver(env, job["save_dir"], tag=f"{job['policy']}-{job['target']}")
+    policy = _make_policy(job["spec"], env)
+    t0 = time.perf_counter()
+    obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
+    policy.reset(job["seed"])
+    steps, ret = 0, 0.0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs))
+        steps += 1
+        ret += float(reward)
+        if terminated or truncated:
+            break
+    base = env.unwrapped
+    trace = base.sim.trace()
+    n0 = base.episode_start
+    origin = trace[n0 - 1, [0, 2]]
+    row = {
+        "policy": job["policy"], "target": job["target"], "seed": job["seed"],
+        **{k: float(info[k]) for k in TERMS}, "return": ret,
+        "laid_length": float(info["laid_length"]), "target_length": float(info["target_length"]),
+        "steps": steps, "is_success": bool(info["is_success"]),
+        "failure": info.get("failure", ""), "wall_s": round(time.perf_counter() - t0, 2),
+    }  # fmt: skip
+    rec = getattr(env, "paths", None)
+    env.close()
+    return {
+        "row": row,
+        "trace": trace[n0 - 1 :, [0, 2]] - origin,
+        "target_points": base.target_path - origin,
+        "episode_file": str(rec[-1]) if rec else None,
+    }
+
+
+# ---- constant-flow grid search ------------------------------------------------------------
+
+
+def _record_constant(args: tuple) -> Any:
+    from policies.constant import record_constant
+
+    limit_threads()
+    env_kwargs, max_steps, vbar, phi, seed = args
+    env = make_env(env_kwargs, max_steps)
+    try:
+        return record_constant(env, vbar, phi, seed, max_steps)
+    finally:
+        env.close()
+
+
+def constant_search(env_kwargs, max_steps, targets, pool, out: Path) -> dict[str, dict]:
+    """Best constant flow per target (policies/constant.py); writes the grid and the
+    choice to ``out``."""
+    from policies.constant import grid, search
+
+    env = make_env(env_kwargs, max_steps)
+    tol = env.unwrapped.tolerance
+    weights = tuple(float(w) for w in env.unwrapped.weights)
+    env.close()
+    flows = grid(CONSTANT_SPEEDS, CONSTANT_DIRECTIONS)
+    jobs = [(env_kwargs, max_steps, v, p, s) for v, p in flows for s in CONSTANT_SEARCH_SEEDS]
+    traces = pool.map(_record_constant, jobs, chunksize=1)
+    best, rows = search(traces, targets, tol, weights)
+    _write_csv(out / "constant_grid.csv", rows)
+    meta = {"speeds": CONSTANT_SPEEDS, "n_directions": CONSTANT_DIRECTIONS,
+            "search_seeds": CONSTANT_SEARCH_SEEDS, "max_episode_steps": max_steps,
+            "best": best}  # fmt: skip
+    (out / "constant_best.json").write_text(json.dumps(meta, indent=2) + "\n")
+    return best
+
+
+# ---- tables -------------------------------------------------------------------------------
+
+
+def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+    if not rows:
+        return
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def aggregate(rows: Sequence[dict[str, Any]], policies: Sequence[str], targets: Sequence[str],
+              seeds: Sequence[int]) -> list[dict[str, Any]]:  # fmt: skip
+    """Per (policy, target) and over all targets (per-seed means over targets), mean ±
+    std over seeds, and the normalised score against random (module doc)."""
+    by = defaultdict(dict)
+    for r in rows:
+        by[(r["policy"], r["target"])][r["seed"]] = r
+    table = []
+    rand = {}
+    for t in targets:
+        if ("random", t) in by:
+            rand[t] = float(np.mean([x["score"] for x in by[("random", t)].values()]))
+
+    def norm(score: float, floor: float | None) -> float:
+        return (score - floor) / (1.0 - floor) if floor is not None else math.nan
+
+    for p in policies:
+        for t in targets:
+            eps = list(by[(p, t)].values())
+            if not eps:
+                continue
+            row = {"policy": p, "target": t, "n": len(eps)}
+            for k in TERMS:
+                v = [e[k] for e in eps]
+                row[f"{k}_mean"], row[f"{k}_std"] = float(np.mean(v)), float(np.std(v))
+            row["success_rate"] = float(np.mean([e["is_success"] for e in eps]))
+            row["normalized_score"] = norm(row["score_mean"], rand.get(t))
+            table.append(row)
+        per_seed = {k: [] for k in TERMS}
+        norm_seed = []
+        for s in seeds:
+            eps = [by[(p, t)][s] for t in targets if s in by[(p, t)]]
+            if len(eps) != len(targets):
+                continue
+            for k in TERMS:
+                per_seed[k].append(float(np.mean([e[k] for e in eps])))
+            if len(rand) == len(targets):
+                norm_seed.append(norm(per_seed["score"][-1], float(np.mean(list(rand.values())))))
+        if per_seed["score"]:
+            row = {"policy": p, "target": "ALL", "n": len(per_seed["score"]) * len(targets)}
+            for k in TERMS:
+                row[f"{k}_mean"] = float(np.mean(per_seed[k]))
+                row[f"{k}_std"] = float(np.std(per_seed[k]))
+            row["success_rate"] = float(np.mean([
+                by[(p, t)][s]["is_success"] for t in targets for s in by[(p, t)]
+            ]))  # fmt: skip
+            row["normalized_score"] = float(np.mean(norm_seed)) if norm_seed else math.nan
+            table.append(row)
+    return table
+
+
+def _save_results(out: Path, results: Sequence[dict[str, Any]]) -> None:
+    """``episodes.json`` (rows) and ``traces.npz`` (trace and target per episode), for
+    ``--reuse``."""
+    rows = [r["row"] for r in results]
+    (out / "episodes.json").write_text(json.dumps(rows) + "\n")
+    arrays = {}
+    for i, r in enumerate(results):
+        arrays[f"trace_{i}"] = r["trace"].astype(np.float32)
+        arrays[f"target_{i}"] = r["target_points"].astype(np.float32)
+    np.savez_compressed(out / "traces.npz", **arrays)
+
+
+def _load_results(path: Path, skip: set[str]) -> list[dict[str, Any]]:
+    """Episodes saved by a previous run in ``path`` whose policy is not in ``skip``."""
+    rows = json.loads((path / "episodes.json").read_text())
+    data = np.load(path / "traces.npz")
+    return [{"row": row, "trace": data[f"trace_{i}"], "target_points": data[f"target_{i}"],
+             "episode_file": None}
+            for i, row in enumerate(rows) if row["policy"] not in skip]  # fmt: skip
+
+
+# ---- plots --------------------------------------------------------------------------------
+
+
+def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    first = {}
+    for r in results:
+        key = (r["row"]["policy"], r["row"]["target"])
+        if key not in first or r["row"]["seed"] < first[key]["row"]["seed"]:
+            first[key] = r
+    policies = list(dict.fromkeys(r["row"]["policy"] for r in results))
+
+    def draw(ax, t):
+        tgt = next(first[(p, t)]["target_points"] for p in policies if (p, t) in first)
+        ax.plot(tgt[:, 0], tgt[:, 1], color="red", lw=6, alpha=0.25, label="target (±τ_b)")
+        for p in policies:
+            if (p, t) in first:
+                tr = first[(p, t)]["trace"]
+                sc = first[(p, t)]["row"]["score"]
+                ax.plot(tr[:, 0], tr[:, 1], color=COLORS.get(p), lw=1.0, label=f"{p} Φ={sc:.2f}")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(t)
+        ax.set_xlabel("x (L_vb, across the steps)")
+        ax.set_ylabel("z (L_vb)")
+
+    for t in targets:
+        fig, ax = plt.subplots(figsize=(6, 5))
+        draw(ax, t)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        fig.savefig(out / f"traces_{t}.png", dpi=90)
+        plt.close(fig)
+    n = len(targets)
+    cols = min(4, n)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.8 * rows), squeeze=False)
+    for ax, t in zip(axes.flat, targets, strict=False):
+        draw(ax, t)
+        ax.legend(fontsize=6, loc="best")
+    for ax in list(axes.flat)[n:]:
+        ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(out / "traces.png", dpi=80)
+    plt.close(fig)
+
+
+def plot_learning_curves(runs: Sequence[Path], out: Path, baselines: dict[str, float]) -> bool:
+    """Mean return (= final score) on the EvalCallback's held-out targets against steps."""
+    curves = []
+    for run in runs:
+        path = Path(run) / "evaluations.npz"
+        if path.is_file():
+            d = np.load(path)
+            curves.append((Path(run).name, d["timesteps"], d["results"]))
+    if not curves:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, t, r in curves:
+        m, s = r.mean(axis=1), r.std(axis=1)
+        color = COLORS.get(name.rsplit("_s", 1)[0])
+        ax.plot(t, m, marker="o", label=name, color=color)
+        ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
+    for name, v in baselines.items():
+        ax.axhline(v, ls="--", color=COLORS.get(name, "k"), lw=1, label=f"{name} (same targets)")
+    ax.set_xlabel("training steps")
+    ax.set_ylabel("eval return = final score Φ")
+    ax.set_title("EvalCallback on held-out targets")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "learning_curves.png", dpi=90)
+    plt.close(fig)
+    return True
+
+
+# ---- driver -------------------------------------------------------------------------------
+
+
+def _rrd(results: Sequence[dict[str, Any]], rrd_dir: Path) -> list[Path]:
+    from cnt_env import replay
+
+    try:
+        replay.import_rerun()
+    except ImportError as exc:
+        print(f"--rrd skipped: rerun is not installed ({exc}); {replay.INSTALL_HINT}")
+        return []
+    rrd_dir.mkdir(parents=True, exist_ok=True)
+    done, paths = set(), []
+    for r in sorted(results, key=lambda r: r["row"]["seed"]):
+        key = (r["row"]["policy"], r["row"]["target"])
+        if key in done or not r["episode_file"]:
+            continue
+        done.add(key)
+        path = rrd_dir / f"{key[0]}_{key[1]}.rrd"
+        replay.record_episode(r["episode_file"], path)
+        paths.append(path)
+    return paths
+
+
+def evaluate(
+    policies: Sequence[str],
+    targets: Sequence[str],
+    seeds: Sequence[int],
+    config: dict[str, Any],
+    out: Path,
+    models: Path = PRETRAINED,
+    runs: Sequence[Path] = (),
+    constant_from: Path | None = None,
+    jobs: int = 2,
+    save_episodes: Path | None = None,
+    rrd: Path | None = None,
+    reuse: Sequence[Path] = (),
+) -> list[dict[str, Any]]:
+    """Run the evaluation and write the tables and plots (module doc). Returns the table."""
+    limit_threads()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    env_kwargs, max_steps = env_settings(config)
+    t0 = time.perf_counter()
+    ctx = mp.get_context("forkserver")
+    tmp = None
+    if rrd is not None and save_episodes is None:
+        tmp = tempfile.TemporaryDirectory()
+        save_episodes = Path(tmp.name)
+    reused: set[str] = set()
+    if reuse:
+        have = {(r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
+                for d in reuse for r in _load_results(Path(d), skip=set())}  # fmt: skip
+        reused = {p for p in policies
+                  if all((p, t, s) in have for t in targets for s in seeds)}  # fmt: skip
+        if reused:
+            print(f"reusing the episodes of {sorted(reused)} from {reuse}")
+    with ctx.Pool(jobs) as pool:
+        specs: dict[str, dict[str, Any]] = {}
+        best = None
+        if "constant" in policies and "constant" not in reused:
+            if constant_from is not None:
+                best = json.loads(Path(constant_from).read_text())["best"]
+                missing = [t for t in targets if t not in best]
+                if missing:
+                    raise ValueError(f"{constant_from} has no constant flow for {missing}")
+            else:
+                best = constant_search(env_kwargs, max_steps, targets, pool, out)
+        t_search = time.perf_counter() - t0
+        job_list = []
+        for p in policies:
+            if p in reused:
+                continue
+            trained = p not in BASELINES
+            if trained:
+                model = Path(models) / f"{p}.zip"
+                if not model.is_file():
+                    raise FileNotFoundError(f"no {p} model at {model}; train one with cnt-train")
+            for t in targets:
+                spec = {"kind": p}
+                if p == "constant":
+                    spec.update(vbar=best[t]["vbar"], phi=best[t]["phi"])
+                if trained:
+                    spec["model"] = str(Path(models) / f"{p}.zip")
+                specs[p] = spec
+                for s in seeds:
+                    job_list.append({
+                        "policy": p, "spec": spec, "target": t, "seed": int(s),
+                        "env_kwargs": env_kwargs, "max_steps": max_steps,
+                        "save_dir": str(save_episodes) if save_episodes else None,
+                    })  # fmt: skip
+        results = pool.map(run_episode, job_list, chunksize=1)
+    if reuse:
+        old = [r for d in reuse for r in _load_results(Path(d), skip=set(policies) - reused)]
+        seen, keep = set(), []
+        for r in old:  # first directory wins
+            key = (r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
+            if key not in seen and r["row"]["policy"] in policies:
+                seen.add(key)
+                keep.append(r)
+        results = keep + results
+    rows = [r["row"] for r in results]
+    _write_csv(out / "episodes.csv", rows)
+    _save_results(out, results)
+    table = aggregate(rows, policies, targets, seeds)
+    _write_csv(out / "results.csv", table)
+    overall = {r["policy"]: r for r in table if r["target"] == "ALL"}
+    summary = {
+        "policies": {
+            p: {"score_mean": overall[p]["score_mean"], "score_std": overall[p]["score_std"]}
+            for p in policies if p in overall
+        },
+        "targets": list(targets),
+        "seeds": [int(s) for s in seeds],
+    }  # fmt: skip
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "results.md").write_text(markdown_tables(table))
+    plot_traces(results, targets, out)
+    if runs:
+        eval_targets = config.get("eval_targets") or []
+        base = {}
+        for p in ("constant", "scripted", "random"):
+            v = [r["score"] for r in rows if r["policy"] == p and r["target"] in eval_targets]
+            if v:
+                base[p] = float(np.mean(v))
+        plot_learning_curves(runs, out, base)
+    if rrd is not None:
+        paths = _rrd(results, Path(rrd))
+        if paths:
+            print(f"rerun recordings: {len(paths)} in {rrd}")
+    if tmp is not None:
+        tmp.cleanup()
+    wall = time.perf_counter() - t0
+    print(_format_table(table))
+    print(f"evaluated {len(job_list)} episodes in {wall:.0f} s (constant search {t_search:.0f} s)")
+    return table
+
+
+def markdown_tables(table: Sequence[dict[str, Any]]) -> str:
+    """Two Markdown tables: over all targets (mean ± std over seeds of Φ and its terms,
+    normalised score), and Φ per policy and target."""
+    overall = [r for r in table if r["target"] == "ALL"]
+    cols = ("score", "coverage", "precision", "progress")
+    out = ["| policy | score Φ | coverage | precision | progress | normalised |",
+           "|---|---|---|---|---|---|"]  # fmt: skip
+    for r in overall:
+        cells = " | ".join(f"{r[f'{k}_mean']:.3f} ± {r[f'{k}_std']:.3f}" for k in cols)
+        out.append(f"| {r['policy']} | {cells} | {round(r['normalized_score'], 6) + 0.0:.3f} |")
+    targets = list(dict.fromkeys(r["target"] for r in table if r["target"] != "ALL"))
+    policies = [r["policy"] for r in overall]
+    cell = {(r["policy"], r["target"]): r for r in table}
+    out += ["", "| target | " + " | ".join(policies) + " |",
+            "|---|" + "---|" * len(policies)]  # fmt: skip
+    for t in targets:
+        vals = [cell[(p, t)]["score_mean"] if (p, t) in cell else math.nan for p in policies]
+        best = int(np.nanargmax(vals))
+        txt = [f"**{v:.3f}**" if i == best else f"{v:.3f}" for i, v in enumerate(vals)]
+        out.append(f"| {t} | " + " | ".join(txt) + " |")
+    return "\n".join(out) + "\n"
+
+
+def _format_table(table: Sequence[dict[str, Any]]) -> str:
+    lines = [f"{'policy':9s} {'target':17s} {'score':>15s} {'coverage':>15s} "
+             f"{'precision':>15s} {'progress':>15s} {'norm':>6s}"]  # fmt: skip
+    for r in table:
+        cells = " ".join(f"{r[f'{k}_mean']:6.3f} ± {r[f'{k}_std']:5.3f}"
+                         for k in ("score", "coverage", "precision", "progress"))  # fmt: skip
+        lines.append(f"{r['policy']:9s} {r['target']:17s} {cells} {r['normalized_score']:6.3f}")
+    return "\n".join(lines)
+
+
+def _csv_list(text: str) -> list[str]:
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0])
+    p.add_argument("--policies", default=",".join(ALL_POLICIES))
+    p.add_argument("--targets", default="all", help="held-out names, comma separated, or all")
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml",
+                   help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
+    p.add_argument("--models", type=Path, default=PRETRAINED,
+                   help="directory of ppo.zip / sac.zip and *_vecnormalize.pkl")  # fmt: skip
+    p.add_argument("--runs", type=Path, nargs="*", default=[],
+                   help="training run directories for the learning curves")  # fmt: skip
+    p.add_argument("--constant-from", type=Path, default=None,
+                   help="reuse the constant flows of a constant_best.json")  # fmt: skip
+    p.add_argument("--out", type=Path, default=Path("training/results"))
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--save-episodes", type=Path, default=None,
+                   help="save every episode (cnt_env.replay episode npz) here")  # fmt: skip
+    p.add_argument("--rrd", type=Path, default=None, help="write rerun recordings here")
+    p.add_argument("--reuse", type=Path, nargs="*", default=[],
+                   help="reuse the episodes of policies fully evaluated in these results "
+                        "dirs (episodes.json + traces.npz); run only the others")  # fmt: skip
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    targets = list(targets_mod.HELD_OUT) if args.targets == "all" else _csv_list(args.targets)
+    seeds = [int(s) for s in _csv_list(args.seeds)]
+    if len(seeds) < 1:
+        raise SystemExit("give at least one seed")
+    evaluate(_csv_list(args.policies), targets, seeds, load_config(args.config), args.out,
+             models=args.models, runs=args.runs, constant_from=args.constant_from,
+             jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
+             reuse=args.reuse)  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,273 @@
+"""Train PPO or SAC on CNTDeposit-v0 (``cnt-train``).
+
+    cnt-train --algo ppo [--config training/configs/ppo.yml] [--seed 0]
+              [--n-timesteps N] [--max-wall-seconds S] [--out runs/] [--n-envs 2]
+
+One run directory ``<out>/<algo>_s<seed>/`` holds:
+
+* ``<algo>.zip`` and ``<algo>_vecnormalize.pkl`` (the VecNormalize statistics, beside
+  the model; load both with :func:`policies.load_policy`);
+* ``config.yml``: the resolved config (hyperparameters, env kwargs, seed, budget,
+  versions, wall time);
+* ``evaluations.npz`` (EvalCallback on held-out targets) and ``learning_curve.csv``;
+* ``checkpoints/`` (CheckpointCallback, with VecNormalize), ``monitor/`` (Monitor CSVs),
+  ``tb/`` (tensorboard, if installed).
+
+Configs are rl-zoo style: one YAML file per algorithm with an entry ``CNTDeposit-v0``
+holding the algorithm's keyword arguments plus ``n_timesteps``, ``policy``,
+``n_envs``, ``normalize``, ``env_kwargs``, ``max_episode_steps``, ``eval_freq``,
+``n_eval_episodes``, ``eval_targets`` and ``save_freq``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .common import (
+    CONFIG_DIR,
+    ENV_ID,
+    NON_ALGO_KEYS,
+    HeldOutCycle,
+    ResidualAction,
+    env_settings,
+    jsonable,
+    limit_threads,
+    load_config,
+    make_env,
+)
+
+__all__ = ["main", "train"]
+
+
+def _callbacks_module():
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ProgressBar(BaseCallback):
+        """tqdm progress bar (SB3's own needs ``rich`` as well)."""
+
+        def __init__(self, total: int) -> None:
+            super().__init__()
+            self.total = total
+            self.bar = None
+
+        def _on_training_start(self) -> None:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(
+                total=self.total, unit="step", dynamic_ncols=True, file=sys.stderr, mininterval=2.0
+            )
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    class WallClockLimit(BaseCallback):
+        """Stop training after ``seconds`` of wall time (the demo's budget)."""
+
+        def __init__(self, seconds: float) -> None:
+            super().__init__()
+            self.seconds = seconds
+            self.t0 = 0.0
+
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < self.seconds
+
+    return ProgressBar, WallClockLimit
+
+
+def _has_tensorboard() -> bool:
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def train(
+    algo: str,
+    config: dict[str, Any],
+    out: Path,
+    seed: int = 0,
+    vec_env: str | None = None,
+    max_wall_seconds: float | None = None,
+    progress_bar: bool = True,
+    verbose: int = 0,
+) -> Path:
+    """Train ``algo`` with ``config`` (an rl-zoo entry); returns the model path."""
+    limit_threads()
+    import stable_baselines3
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    algo = algo.lower()
+    cls = {"ppo": PPO, "sac": SAC}[algo]
+    env_kwargs, max_steps = env_settings(config)
+    n_envs = int(config.get("n_envs", 2))
+    vec_env = vec_env or config.get("vec_env", "subproc")
+    run = Path(out)
+    run.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+
+    residual = dict(config.get("residual") or {})
+    venv = make_vec_env(
+        ENV_ID,
+        n_envs=n_envs,
+        seed=seed,
+        monitor_dir=str(run / "monitor"),
+        env_kwargs={**env_kwargs, "max_episode_steps": max_steps},
+        vec_env_cls=SubprocVecEnv if vec_env == "subproc" and n_envs > 1 else DummyVecEnv,
+        wrapper_class=ResidualAction if residual else None,
+        wrapper_kwargs=residual or None,
+    )
+    normalize = config.get("normalize") or {}
+    if normalize:
+        norm = {"norm_obs": True, "norm_reward": True, **dict(normalize)}
+        venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
+
+    algo_kwargs = {k: v for k, v in config.items() if k not in NON_ALGO_KEYS}
+    tb = str(run / "tb") if _has_tensorboard() else None
+    if tb is None:
+        print("tensorboard is not installed: no tensorboard logs (pip install tensorboard)")
+    model = cls(config.get("policy", "MlpPolicy"), venv, seed=seed, tensorboard_log=tb,
+                verbose=verbose, device="cpu", **algo_kwargs)  # fmt: skip
+
+    callbacks = []
+    total = int(config["n_timesteps"])
+    eval_targets = list(config.get("eval_targets") or [])
+    eval_freq = int(config.get("eval_freq", 0))
+    if eval_targets and eval_freq > 0:
+
+        def eval_env_fn():
+            env = HeldOutCycle(make_env(env_kwargs, max_steps), eval_targets)
+            return Monitor(ResidualAction(env, **residual) if residual else env)
+
+        eval_env = DummyVecEnv([eval_env_fn])
+        if normalize:
+            eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
+                                    norm_obs=bool(norm["norm_obs"]))  # fmt: skip
+        callbacks.append(
+            EvalCallback(
+                eval_env,
+                n_eval_episodes=int(config.get("n_eval_episodes", len(eval_targets))),
+                eval_freq=max(1, eval_freq // n_envs),
+                log_path=str(run),
+                deterministic=True,
+                verbose=verbose,
+            )
+        )
+    save_freq = int(config.get("save_freq", 0))
+    if save_freq > 0:
+        ckpt = CheckpointCallback(max(1, save_freq // n_envs), str(run / "checkpoints"),
+                                  name_prefix=algo, save_vecnormalize=bool(normalize))  # fmt: skip
+        callbacks.append(ckpt)
+    ProgressBar, WallClockLimit = _callbacks_module()
+    if progress_bar:
+        callbacks.append(ProgressBar(total))
+    if max_wall_seconds:
+        callbacks.append(WallClockLimit(float(max_wall_seconds)))
+
+    model.learn(total_timesteps=total, callback=callbacks, tb_log_name=algo)
+    model_path = run / f"{algo}.zip"
+    model.save(str(model_path))
+    if normalize:
+        venv.save(str(run / f"{algo}_vecnormalize.pkl"))
+    venv.close()
+    wall = time.perf_counter() - t_start
+
+    _write_learning_curve(run)
+    resolved = {
+        ENV_ID: jsonable(config),
+        "run": {
+            "algo": algo,
+            "seed": seed,
+            "vec_env": vec_env,
+            "n_envs": n_envs,
+            "timesteps_done": int(model.num_timesteps),
+            "max_wall_seconds": max_wall_seconds,
+            "wall_time_s": round(wall, 1),
+            "steps_per_s": round(model.num_timesteps / wall, 2),
+            "argv": sys.argv,
+            "versions": {
+                "python": platform.python_version(),
+                "stable_baselines3": stable_baselines3.__version__,
+                "numpy": np.__version__,
+            },
+        },
+    }
+    with (run / "config.yml").open("w") as fh:
+        yaml.safe_dump(resolved, fh, sort_keys=False)
+    # beside the model too, for policies.load_policy (the residual base, the env settings)
+    with (run / f"{algo}.yml").open("w") as fh:
+        yaml.safe_dump(resolved, fh, sort_keys=False)
+    print(f"{algo}: {model.num_timesteps} steps in {wall:.0f} s -> {model_path}")
+    return model_path
+
+
+def _write_learning_curve(run: Path) -> None:
+    """``evaluations.npz`` (EvalCallback) as a CSV: timesteps, mean/std of the return
+    (= the final agreement score, rewards being potential differences) over episodes."""
+    path = run / "evaluations.npz"
+    if not path.is_file():
+        return
+    data = np.load(path)
+    with (run / "learning_curve.csv").open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["timesteps", "return_mean", "return_std", "ep_length_mean"])
+        for t, r, n in zip(data["timesteps"], data["results"], data["ep_lengths"], strict=True):
+            w.writerow([int(t), float(np.mean(r)), float(np.std(r)), float(np.mean(n))])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0])
+    p.add_argument("--algo", choices=("ppo", "sac"), required=True)
+    p.add_argument("--config", type=Path, default=None,
+                   help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-timesteps", type=int, default=None, help="override n_timesteps")
+    p.add_argument("--n-envs", type=int, default=None, help="override n_envs")
+    p.add_argument("--max-episode-steps", type=int, default=None)
+    p.add_argument("--max-wall-seconds", type=float, default=None,
+                   help="stop training after this wall time")  # fmt: skip
+    p.add_argument("--vec-env", choices=("subproc", "dummy"), default=None)
+    p.add_argument("--out", type=Path, default=Path("runs"), help="parent of the run directory")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("-v", "--verbose", type=int, default=0)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    config = load_config(args.config or CONFIG_DIR / f"{args.algo}.yml")
+    if args.n_timesteps is not None:
+        config["n_timesteps"] = args.n_timesteps
+    if args.n_envs is not None:
+        config["n_envs"] = args.n_envs
+    if args.max_episode_steps is not None:
+        config["max_episode_steps"] = args.max_episode_steps
+    run = args.out / f"{args.algo}_s{args.seed}"
+    train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
+          max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,
+          verbose=args.verbose)  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
