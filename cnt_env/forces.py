@@ -35,6 +35,31 @@ DRAG_LAWS = {"linear": DRAG_LINEAR, "printed": DRAG_PRINTED}
 PRINTED_EPS = 1e-12
 
 
+@njit(cache=True, inline="always")
+def _edge_velocity_state(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    dt: float,
+    flow: np.ndarray,
+    j: int,
+    t: np.ndarray,
+    vr: np.ndarray,
+) -> float:
+    """Unit tangent t of edge j and the relative velocity v_r = v_flow - (u_j + u_{j+1})/2
+    at its midpoint (implicit-Euler velocities); returns |e_j|."""
+    a = 4 * j
+    b = a + 4
+    ln = 0.0
+    for k in range(3):
+        t[k] = q[b + k] - q[a + k]
+        ln += t[k] * t[k]
+    ln = math.sqrt(ln)
+    for k in range(3):
+        t[k] /= ln
+        vr[k] = flow[k] - 0.5 * (q[a + k] - q_old[a + k] + q[b + k] - q_old[b + k]) / dt
+    return ln
+
+
 @njit(cache=True)
 def add_linear_drag(
     q: np.ndarray,
@@ -61,14 +86,7 @@ def add_linear_drag(
             continue
         a = 4 * j
         b = a + 4
-        ln = 0.0
-        for k in range(3):
-            t[k] = q[b + k] - q[a + k]
-            ln += t[k] * t[k]
-        ln = math.sqrt(ln)
-        for k in range(3):
-            t[k] /= ln
-            vr[k] = flow[k] - 0.5 * (q[a + k] - q_old[a + k] + q[b + k] - q_old[b + k]) / dt
+        ln = _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
         tv = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
         coef = rest_lengths[j] * mu
         for k in range(3):
@@ -177,14 +195,7 @@ def add_printed_drag(
             continue
         a = 4 * j
         c = a + 4
-        ln = 0.0
-        for k in range(3):
-            t[k] = q[c + k] - q[a + k]
-            ln += t[k] * t[k]
-        ln = math.sqrt(ln)
-        for k in range(3):
-            t[k] /= ln
-            vr[k] = flow[k] - 0.5 * (q[a + k] - q_old[a + k] + q[c + k] - q_old[c + k]) / dt
+        _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
         ax = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
         nb2 = 0.0
         for k in range(3):

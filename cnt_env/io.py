@@ -131,11 +131,19 @@ def save_trace(
         "config": np.array(_dumps(dict(config))),
         "stats": np.array(_dumps(dict(stats))),
     }
+    atomic_savez(path, entries)
+    return path
+
+
+def atomic_savez(path: Path, entries: dict[str, np.ndarray], compressed: bool = True) -> None:
+    """Write ``entries`` as an ``.npz`` (no pickle) atomically: into a temporary file in the
+    same folder, then :func:`os.replace`, so a reader (or a concurrent worker) never sees
+    half a file. The one home of this for traces, episodes and warm-start snapshots."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **entries)
+            (np.savez_compressed if compressed else np.savez)(fh, **entries)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
@@ -143,7 +151,6 @@ def save_trace(
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return path
 
 
 def _string(arr: np.ndarray) -> str | None:

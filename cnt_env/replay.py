@@ -62,7 +62,6 @@ import json
 import math
 import os
 import secrets
-import tempfile
 import time
 import zipfile
 import zlib
@@ -74,7 +73,7 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-from .io import to_jsonable
+from .io import atomic_savez, to_jsonable
 
 if TYPE_CHECKING:
     from .deposition import DepositionConfig, DepositionSim
@@ -477,18 +476,7 @@ def save_episode(path: str | os.PathLike[str], episode: Episode) -> Path:
         if name.endswith("_names"):
             value = np.array(list(value), dtype=str) if value else np.zeros(0, dtype="<U1")
         entries[name] = np.asarray(value)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **entries)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_savez(path, entries)
     return path
 
 

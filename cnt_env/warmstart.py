@@ -25,13 +25,13 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import __version__
+from .io import atomic_savez
 
 __all__ = [
     "CACHE_ENV_VAR",
@@ -178,16 +178,7 @@ def save_snapshot(path: str | os.PathLike[str], snap: dict[str, Any], key: str) 
     arrays = flatten_snapshot(snap)
     arrays[_META] = np.asarray(json.dumps({"key": key, "format": FORMAT_VERSION}))
     arrays[_CHECKSUM] = np.asarray(_checksum(arrays))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_savez(Path(path), arrays, compressed=False)
 
 
 def _load_arrays(path: Path, key: str) -> dict[str, np.ndarray]:
