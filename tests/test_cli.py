@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -166,10 +165,8 @@ def test_unphysical_input_is_rejected_before_any_work(
     args: list[str], names: list[str], tmp_path: Path, no_simulation: None
 ) -> None:
     out = tmp_path / "trace.npz"
-    start = time.perf_counter()
     code, stdout, stderr = _call(["run", *args, "--json", "--out", str(out)])
-    assert time.perf_counter() - start < 5.0
-    assert code == 2
+    assert code == 2  # (no_simulation makes any simulation attempt fail the test)
     assert stdout == ""
     assert stderr.startswith("cnt-sim: error: ")
     for name in names:

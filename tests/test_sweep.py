@@ -11,7 +11,6 @@ import contextlib
 import io
 import json
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -91,9 +90,7 @@ def test_invalid_grid_exits_2_before_running(
     grid: list[str], names: list[str], tmp_path: Path, counted: list
 ) -> None:
     out = tmp_path / "sweep.csv"
-    start = time.perf_counter()
     code, stdout, stderr = _call(["sweep", *TINY, *grid, "--out", str(out), "--json"])
-    assert time.perf_counter() - start < 10.0
     assert code == 2, stderr
     assert stdout == ""
     assert "cnt-sim: error: " in stderr
