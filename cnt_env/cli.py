@@ -53,7 +53,10 @@ EXIT_USAGE = 2  # bad input: argparse's code too
 #: Trace length (L_vb) a run deposits when --deposit is not given. Coil: clean circles
 #: follow a start-up of 200-500 L_vb (physics.md §6). Serpentine: about 10 cycles of
 #: ~70 L_vb each (amplitude ~30) after the transient, for the periodicity test (§7).
-DEFAULT_DEPOSIT: dict[str, float] = {"coil": 600.0, "serpentine": 1200.0}
+DEFAULT_DEPOSIT: dict[str, float] = {"coil": 800.0, "serpentine": 1500.0}
+#: start-up length dropped before measuring, per preset (coils are clean after 200-300
+#: L_vb at the validated mesh, serpentines after ~150: benchmarks/RESULTS.md)
+DEFAULT_TRANSIENT: dict[str, float] = {"coil": 300.0, "serpentine": 150.0}
 DEMO_DEPOSIT = 300.0  # ~15 s after the numba compile; enough for a measurable coil
 
 # Choices mirrored from forces.DRAG_LAWS, deposition.CONTACT_MODES and
@@ -239,7 +242,8 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
         raise CliError(f"--deposit must be a finite trace length > 0 in L_vb, got {deposit!r}")
     if args.seed < 0:
         raise CliError(f"--seed must be >= 0, got {args.seed}")
-    measure_options = measure_options_for(args.transient)
+    transient = DEFAULT_TRANSIENT[args.preset] if args.transient is None else args.transient
+    measure_options = measure_options_for(transient)
 
     from cnt_env.deposition import PRESET_DEFAULTS, ContactOptions, DepositionConfig
 
