@@ -650,21 +650,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- parser
 
 
-def _add_run_arguments(run: argparse.ArgumentParser) -> None:
-    run.add_argument(
-        "--preset",
-        choices=units.PRESETS,
-        default="coil",
-        help="the paper's dimensionless groups (default: coil)",
-    )
-    run.add_argument(
-        "--substrate",
-        choices=("flat", "stepped"),
-        default=None,
-        help="flat sticky or stepped (default: the preset's)",
-    )
-
-    g = run.add_argument_group("dimensionless groups (override the preset; lengths in L_vb)")
+def add_group_arguments(g: Any) -> None:
+    """The dimensionless-group flags shared by ``run`` and ``sweep`` (GROUP_FIELDS)."""
     g.add_argument("--Hbar", type=float, help="rod height H / L_vb")
     g.add_argument("--Ibar", type=float, help="mass per length rho e_v^2 / (k_b mu^2)")
     g.add_argument("--vbar", type=float, help="flow speed v mu H / e_v (>= 0)")
@@ -686,27 +673,10 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
         type=float,
         help="time step in mu L_vb^2 / e_v (default: DepositionConfig.dt_factor Hbar)",
     )
-    g.add_argument(
-        "--deposit",
-        type=float,
-        metavar="LENGTH",
-        help="trace length to deposit, L_vb (default: "
-        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_DEPOSIT.items())
-        + ")",
-    )
 
-    si = run.add_argument_group(
-        "SI values (replace the preset's SI values; when given, they win over --Hbar/--Ibar/--vbar)"
-    )
-    si.add_argument("--kb", type=float, metavar="N_M2", help="bending stiffness k_b [N m^2]")
-    si.add_argument("--ev", type=float, metavar="J_PER_M", help="vdW adhesion energy e_v [J/m]")
-    si.add_argument("--rho", type=float, metavar="KG_PER_M", help="mass per length [kg/m]")
-    si.add_argument("--mu", type=float, metavar="PA_S", help="drag coefficient mu [Pa s]")
-    si.add_argument("--H", type=float, metavar="M", help="rod height H [m]")
-    si.add_argument("--v", type=float, metavar="M_PER_S", help="flow speed v [m/s]")
 
-    m = run.add_argument_group("model and solver options")
-    m.add_argument("--seed", type=int, default=0, help="seed of the start-up noise (default 0)")
+def add_model_arguments(m: Any) -> None:
+    """The model and solver flags shared by ``run`` and ``sweep`` (see resolve_run)."""
     m.add_argument("--drag-law", choices=DRAG_LAWS, default="linear")
     m.add_argument(
         "--sliding",
@@ -733,12 +703,53 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
         metavar="R",
         help="radius of the start-up contact arc, L_vb (default: 6.4 flat, 3.9 stepped)",
     )
+
+
+def _add_run_arguments(run: argparse.ArgumentParser) -> None:
+    run.add_argument(
+        "--preset",
+        choices=units.PRESETS,
+        default="coil",
+        help="the paper's dimensionless groups (default: coil)",
+    )
+    run.add_argument(
+        "--substrate",
+        choices=("flat", "stepped"),
+        default=None,
+        help="flat sticky or stepped (default: the preset's)",
+    )
+
+    g = run.add_argument_group("dimensionless groups (override the preset; lengths in L_vb)")
+    add_group_arguments(g)
+    g.add_argument(
+        "--deposit",
+        type=float,
+        metavar="LENGTH",
+        help="trace length to deposit, L_vb (default: "
+        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_DEPOSIT.items())
+        + ")",
+    )
+
+    si = run.add_argument_group(
+        "SI values (replace the preset's SI values; when given, they win over --Hbar/--Ibar/--vbar)"
+    )
+    si.add_argument("--kb", type=float, metavar="N_M2", help="bending stiffness k_b [N m^2]")
+    si.add_argument("--ev", type=float, metavar="J_PER_M", help="vdW adhesion energy e_v [J/m]")
+    si.add_argument("--rho", type=float, metavar="KG_PER_M", help="mass per length [kg/m]")
+    si.add_argument("--mu", type=float, metavar="PA_S", help="drag coefficient mu [Pa s]")
+    si.add_argument("--H", type=float, metavar="M", help="rod height H [m]")
+    si.add_argument("--v", type=float, metavar="M_PER_S", help="flow speed v [m/s]")
+
+    m = run.add_argument_group("model and solver options")
+    m.add_argument("--seed", type=int, default=0, help="seed of the start-up noise (default 0)")
+    add_model_arguments(m)
     m.add_argument(
         "--transient",
         type=float,
         metavar="L",
-        help="start-up arc length dropped before measuring, L_vb "
-        "(default: patterns.MeasureOptions.transient_length)",
+        help="start-up arc length dropped before measuring, L_vb (default: "
+        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_TRANSIENT.items())
+        + ")",
     )
 
     o = run.add_argument_group("outputs (each gets its resolved config as <file>.json)")

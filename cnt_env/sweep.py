@@ -1046,13 +1046,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
 
     g = p.add_argument_group("base groups (override the preset; lengths in L_vb)")
-    g.add_argument("--Hbar", type=float, help="rod height H / L_vb")
-    g.add_argument("--Ibar", type=float, help="mass per length rho e_v^2 / (k_b mu^2)")
-    g.add_argument("--vbar", type=float, help="flow speed v mu H / e_v (>= 0)")
-    g.add_argument("--phi", type=float, help="flow direction in the x-z plane from +x [rad]")
-    g.add_argument("--kappa-c", dest="kappa_c", type=float, help="critical curvature kappa_c L_vb")
-    g.add_argument("--delta", type=float, help="discretisation length delta / L_vb")
-    g.add_argument("--dt", type=float, help="time step (default: dt_factor Hbar)")
+    cli.add_group_arguments(g)
     g.add_argument(
         "--deposit",
         type=float,
@@ -1067,12 +1061,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="give each grid point its own seed (seed + point index x repeats)",
     )
-    m.add_argument("--drag-law", choices=cli.DRAG_LAWS, default="linear")
-    m.add_argument("--sliding", choices=cli.SLIDING_OPTIONS, default="B")
-    m.add_argument("--coarse-delta", type=float, default=None)
-    m.add_argument("--fine-length", type=float, default=20.0)
-    m.add_argument("--contact-mode", choices=cli.CONTACT_MODES, default="event")
-    m.add_argument("--initial-radius", type=float, metavar="R")
+    cli.add_model_arguments(m)
     m.add_argument("--transient", type=float, metavar="L", help="arc dropped before measuring")
 
     x = p.add_argument_group("execution")
