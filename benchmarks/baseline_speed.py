@@ -19,8 +19,8 @@ import argparse
 import json
 import time
 
-from cnt_env.deposition import DepositionSim, default_config
 from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.sim.deposition import DepositionSim, default_config
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cnt_env.rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial
+from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

@@ -37,11 +37,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from cnt_env import warmstart  # noqa: E402
-from cnt_env.deposition import DepositionSim  # noqa: E402
-from cnt_env.env import CNTDepositEnv  # noqa: E402
 from cnt_env.patterns import MeasureOptions  # noqa: E402
 from cnt_env.patterns import measure as measure_pattern  # noqa: E402
+from cnt_env.sim import warmstart  # noqa: E402
+from cnt_env.sim.deposition import DepositionSim  # noqa: E402
+from cnt_env.task.env import CNTDepositEnv  # noqa: E402
 
 GOAL_STEPS_PER_S = 100.0
 

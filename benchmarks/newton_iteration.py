@@ -24,7 +24,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from cnt_env.rod.banded import KL, KU, band_lu_factor, band_lu_solve
-from cnt_env.rod.stepper import DragParams, Rod, RodMaterial, assemble, update_frames
+from cnt_env.sim.stepper import DragParams, Rod, RodMaterial, assemble, update_frames
 
 
 def make_rod(n_nodes: int) -> Rod:

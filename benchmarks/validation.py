@@ -66,8 +66,8 @@ COIL_CASES: dict[str, dict] = {
 def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     import math
 
-    from cnt_env.deposition import DepositionConfig, DepositionSim
     from cnt_env.patterns import MeasureOptions, measure
+    from cnt_env.sim.deposition import DepositionConfig, DepositionSim
     from cnt_env.units import paper_groups
 
     c = {**DEFAULTS[suite], **CASES[suite][name]}

@@ -20,7 +20,7 @@ MAX_EPISODE_STEPS = 400
 if "CNTDeposit-v0" not in _registry:
     _register(
         id="CNTDeposit-v0",
-        entry_point="cnt_env.env:CNTDepositEnv",
+        entry_point="cnt_env.task.env:CNTDepositEnv",
         max_episode_steps=MAX_EPISODE_STEPS,
     )
 

@@ -38,10 +38,18 @@ from typing import TYPE_CHECKING, Any
 
 from cnt_env import units
 from cnt_env.io import TraceFileError, load_trace, save_trace, to_jsonable
+from cnt_env.presets import (
+    DEFAULT_KAPPA_C,
+    DEMO_DEPOSIT,
+    INITIAL_RADIUS,
+    MESH,
+    RUN_DEPOSIT,
+    RUN_TRANSIENT,
+)
 
 if TYPE_CHECKING:
-    from cnt_env.deposition import DepositionConfig, DepositionSim
     from cnt_env.patterns import MeasureOptions
+    from cnt_env.sim.deposition import DepositionConfig, DepositionSim
 
 DIST_NAME = "cnt-env"
 PROG = "cnt-sim"
@@ -53,11 +61,8 @@ EXIT_USAGE = 2  # bad input: argparse's code too
 #: Trace length (L_vb) a run deposits when --deposit is not given. Coil: clean circles
 #: follow a start-up of 200-500 L_vb (physics.md §6). Serpentine: about 10 cycles of
 #: ~70 L_vb each (amplitude ~30) after the transient, for the periodicity test (§7).
-DEFAULT_DEPOSIT: dict[str, float] = {"coil": 800.0, "serpentine": 1500.0}
 #: start-up length dropped before measuring, per preset (coils are clean after 200-300
 #: L_vb at the validated mesh, serpentines after ~150: benchmarks/RESULTS.md)
-DEFAULT_TRANSIENT: dict[str, float] = {"coil": 300.0, "serpentine": 150.0}
-DEMO_DEPOSIT = 300.0  # ~15 s after the numba compile; enough for a measurable coil
 
 # Choices mirrored from forces.DRAG_LAWS, deposition.CONTACT_MODES and
 # substrate.SLIDING_OPTIONS, so that parsing does not import numba. The simulator
@@ -66,8 +71,6 @@ DRAG_LAWS = ("linear", "printed")
 CONTACT_MODES = ("event", "project")
 SLIDING_OPTIONS = ("B", "C")
 #: start-up contact arc radius R_i (physics.md §4: ~0.5 um, 6.4 L_vb flat, 3.9 stepped)
-DEFAULT_INITIAL_RADIUS: dict[str, float] = {"flat": 6.4, "stepped": 3.9}
-DEFAULT_KAPPA_C = 0.2  # the paper's kappa_c L_vb, when --substrate stepped turns steps on
 
 # Dimensionless groups settable on the command line: argparse dest -> field.
 GROUP_FIELDS: dict[str, str] = {
@@ -237,17 +240,17 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
     except units.ParameterError as exc:
         raise _invalid(exc) from exc
 
-    deposit = DEFAULT_DEPOSIT[args.preset] if args.deposit is None else args.deposit
+    deposit = RUN_DEPOSIT[args.preset] if args.deposit is None else args.deposit
     if not (math.isfinite(deposit) and deposit > 0.0):
         raise CliError(f"--deposit must be a finite trace length > 0 in L_vb, got {deposit!r}")
     if args.seed < 0:
         raise CliError(f"--seed must be >= 0, got {args.seed}")
-    transient = DEFAULT_TRANSIENT[args.preset] if args.transient is None else args.transient
+    transient = RUN_TRANSIENT[args.preset] if args.transient is None else args.transient
     measure_options = measure_options_for(transient)
 
-    from cnt_env.deposition import PRESET_DEFAULTS, ContactOptions, DepositionConfig
+    from cnt_env.sim.deposition import ContactOptions, DepositionConfig
 
-    mesh = PRESET_DEFAULTS[args.preset]
+    mesh = MESH[args.preset]
     try:
         if args.delta is None:  # the preset's validated mesh
             params = dataclasses.replace(params, delta_bar=mesh["delta_bar"])
@@ -257,7 +260,7 @@ def resolve_run(args: argparse.Namespace) -> RunSpec:
         contact = ContactOptions(mode=args.contact_mode)
         radius = args.initial_radius
         if radius is None:
-            radius = DEFAULT_INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
+            radius = INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         sim_config = DepositionConfig(
             params=params, dt=args.dt, drag_law=args.drag_law, contact=contact,
             initial_radius=radius, sliding=args.sliding, coarse_delta=coarse,
@@ -340,7 +343,7 @@ def simulate(
     Returns the simulator and its ``stats()`` plus ``wall_time_s``. Raises
     ``SimulationError`` when the solver fails.
     """
-    from cnt_env.deposition import DepositionSim
+    from cnt_env.sim.deposition import DepositionSim
 
     start = time.perf_counter()
     sim = DepositionSim(config, seed=seed)
@@ -481,7 +484,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if rrd is not None:
         _require_rerun()
 
-    from cnt_env.rod.stepper import SimulationError
+    from cnt_env.sim.stepper import SimulationError
 
     show_bar = not args.json and sys.stderr.isatty()
     try:
@@ -726,7 +729,7 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
         type=float,
         metavar="LENGTH",
         help="trace length to deposit, L_vb (default: "
-        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_DEPOSIT.items())
+        + ", ".join(f"{k} {v:g}" for k, v in RUN_DEPOSIT.items())
         + ")",
     )
 
@@ -748,7 +751,7 @@ def _add_run_arguments(run: argparse.ArgumentParser) -> None:
         type=float,
         metavar="L",
         help="start-up arc length dropped before measuring, L_vb (default: "
-        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_TRANSIENT.items())
+        + ", ".join(f"{k} {v:g}" for k, v in RUN_TRANSIENT.items())
         + ")",
     )
 

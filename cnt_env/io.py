@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .units import DimensionlessParams
+from cnt_env.units import DimensionlessParams
 
 __all__ = [
     "TRACE_FORMAT",
@@ -120,7 +120,7 @@ def save_trace(
     if isinstance(params, DimensionlessParams):
         params = params.as_dict()
     if version is None:
-        from . import __version__ as version
+        from cnt_env import __version__ as version
     entries = {
         "format": np.array(TRACE_FORMAT),
         "format_version": np.array(TRACE_FORMAT_VERSION, dtype=np.int64),

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .patterns import MeasureOptions, arc_length, fit_circle, uturns
+from cnt_env.patterns import MeasureOptions, arc_length, fit_circle, uturns
 
 __all__ = ["last_turn_circle", "plot_run", "uturn_markers"]
 

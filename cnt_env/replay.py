@@ -73,10 +73,10 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-from .io import atomic_savez, to_jsonable
+from cnt_env.io import atomic_savez, to_jsonable
 
 if TYPE_CHECKING:
-    from .deposition import DepositionConfig, DepositionSim
+    from cnt_env.sim.deposition import DepositionConfig, DepositionSim
 
 __all__ = [
     "APPLICATION_ID",
@@ -295,7 +295,7 @@ class Episode:
     ``meta``             dict          JSON: recording_id, seed, episode, target, params…
     ===================  ============  ===============================================
 
-    Trace nodes never change index once laid (cnt_env.deposition), so frame i's trace
+    Trace nodes never change index once laid (cnt_env.sim.deposition), so frame i's trace
     is ``trace[:trace_len[i]]``; nodes still in the solve may have slid a little since.
     The episode's own trace starts at the contact point at reset,
     ``trace[trace_len[0] - 1]``.
@@ -461,7 +461,7 @@ def save_episode(path: str | os.PathLike[str], episode: Episode) -> Path:
     = 1 and ``version`` (the cnt_env version). The file is written to a temporary
     name and renamed. Returns the path.
     """
-    from . import __version__
+    from cnt_env import __version__
 
     path = Path(path)
     entries: dict[str, np.ndarray] = {
@@ -1555,8 +1555,8 @@ def record_run(
     and the ``SimulationError`` re-raised. Returns ``(sim, stats)``, ``stats`` with
     ``wall_time_s`` (which includes the logging).
     """
-    from .deposition import DepositionSim
-    from .rod.stepper import SimulationError
+    from cnt_env.sim.deposition import DepositionSim
+    from cnt_env.sim.stepper import SimulationError
 
     rr = import_rerun()
     run_config = dict(run_config or {})

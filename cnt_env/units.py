@@ -558,8 +558,8 @@ def preset(name: str, *, delta_bar: float = DEFAULT_DELTA_BAR) -> PhysicalParams
 PAPER_GROUPS: dict[str, dict[str, float | None]] = {
     "coil": {"Hbar": 253.0, "Ibar": 2200.0, "ks_over_ev": 6.6e3, "vbar": 0.0,
              "kappa_c_bar": None},
-    "serpentine": {"Hbar": 155.0, "Ibar": 300.0, "ks_over_ev": 1.8e4, "vbar": 0.037,
-                   "kappa_c_bar": 0.2},
+    "serpentine": {"Hbar": 155.0, "Ibar": 300.0, "ks_over_ev": 1.8e4, "vbar": PAPER_VBAR,
+                   "kappa_c_bar": PAPER_KAPPA_C_BAR},
 }  # fmt: skip
 
 

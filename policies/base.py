@@ -13,7 +13,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from cnt_env.env import flow_from_action
+from cnt_env.task.env import flow_from_action
 
 __all__ = ["ConstantPolicy", "Policy", "RandomPolicy", "action_from_flow"]
 
@@ -31,7 +31,7 @@ class Policy(Protocol):
 
 def action_from_flow(vbar: float, phi: float, vbar_max: float) -> np.ndarray:
     """The action whose flow is ``(vbar, phi)``: the inverse of the env's elliptical grid
-    map (:func:`cnt_env.env.flow_from_action`), disk -> square (Fong 2015, eq. for the
+    map (:func:`cnt_env.task.env.flow_from_action`), disk -> square (Fong 2015, eq. for the
     "elliptical grid" inverse)."""
     r = min(max(vbar / vbar_max, 0.0), 1.0)
     u, w = r * math.cos(phi), r * math.sin(phi)

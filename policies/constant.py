@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from cnt_env import targets as targets_mod
-from cnt_env.env import COVERAGE_SPACING
+from cnt_env.task import targets as targets_mod
+from cnt_env.task.env import COVERAGE_SPACING
 
 from .base import action_from_flow
 

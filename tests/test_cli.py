@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import cnt_env.deposition
+import cnt_env.sim.deposition
 from cnt_env import cli, units
 from cnt_env.io import TraceFileError, load_trace, save_trace, to_jsonable
 
@@ -77,7 +77,7 @@ def no_simulation(monkeypatch: pytest.MonkeyPatch) -> None:
     def forbidden(*args: object, **kwargs: object) -> None:
         raise AssertionError("a simulation was started")
 
-    monkeypatch.setattr(cnt_env.deposition, "DepositionSim", forbidden)
+    monkeypatch.setattr(cnt_env.sim.deposition, "DepositionSim", forbidden)
 
 
 # --------------------------------------------------------------------------- run

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from cnt_env.deposition import ContactOptions, DepositionConfig, DepositionSim, initial_shape
-from cnt_env.rod.stepper import NewtonOptions, SimulationError
+from cnt_env.sim.deposition import ContactOptions, DepositionConfig, DepositionSim, initial_shape
+from cnt_env.sim.stepper import NewtonOptions, SimulationError
 from cnt_env.units import PhysicalParams, paper_groups
 
 

@@ -28,10 +28,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import cnt_env
-from cnt_env import targets as T
-from cnt_env import warmstart
-from cnt_env.env import CNTDepositEnv, flow_from_action
-from cnt_env.rod.stepper import SimulationError
+from cnt_env.sim import warmstart
+from cnt_env.sim.stepper import SimulationError
+from cnt_env.task import targets as T
+from cnt_env.task.env import CNTDepositEnv, flow_from_action
 
 ENV_ID = "CNTDeposit-v0"
 # small rod: dt = 0.05 Hbar = 1.5 tau, so control_interval = 15 tau is 10 physics steps
@@ -117,14 +117,15 @@ def no_unexpected_warnings():
 def test_import_is_light_and_registers_the_env() -> None:
     code = (
         "import sys, cnt_env, gymnasium;"
-        "heavy = [m for m in ('numba', 'rerun', 'torch', 'cnt_env.env', 'cnt_env.deposition')"
+        "heavy = [m for m in ('numba', 'rerun', 'torch', 'cnt_env.task.env',"
+        " 'cnt_env.sim.deposition')"
         " if m in sys.modules];"
         "spec = gymnasium.spec('CNTDeposit-v0');"
         "print(heavy, spec.entry_point, spec.max_episode_steps)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env=os.environ.copy()).stdout.split("\n")[0]  # fmt: skip
-    assert out == "[] cnt_env.env:CNTDepositEnv 400"
+    assert out == "[] cnt_env.task.env:CNTDepositEnv 400"
     assert gymnasium.spec(ENV_ID).max_episode_steps == cnt_env.MAX_EPISODE_STEPS
 
 
@@ -358,7 +359,7 @@ def test_simulation_failure_is_a_clean_penalised_termination(kw: dict) -> None:
 def test_a_real_newton_failure_ends_the_episode_cleanly(kw: dict) -> None:
     """One Newton iteration and no dt halving: the solver gives up at once (also in the
     random advance at reset, which then starts from the warm state itself)."""
-    from cnt_env.rod.stepper import NewtonOptions
+    from cnt_env.sim.stepper import NewtonOptions
 
     env = make(kw, warmup_length=0.0,
                sim_options={"newton": NewtonOptions(max_iter=1, max_halvings=0),

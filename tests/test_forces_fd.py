@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnt_env.forces import add_linear_drag, add_printed_drag, add_vdw
 from cnt_env.rod.banded import KL, KU, LDAB
+from cnt_env.sim.forces import add_linear_drag, add_printed_drag, add_vdw
 from tests.rodkit import random_rod
 
 H_FD = 1e-7

@@ -10,9 +10,9 @@ import gymnasium
 import numpy as np
 import pytest
 
-from cnt_env import targets as T
-from cnt_env import warmstart
-from cnt_env.env import flow_from_action
+from cnt_env.sim import warmstart
+from cnt_env.task import targets as T
+from cnt_env.task.env import flow_from_action
 from policies import (
     PRETRAINED_DIR,
     ConstantPolicy,

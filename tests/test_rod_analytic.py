@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnt_env.rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
+from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
 
 
 def straight_nodes(n_edges: int, length: float = 1.0, axis: int = 0) -> np.ndarray:

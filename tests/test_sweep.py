@@ -18,7 +18,7 @@ import pytest
 
 from cnt_env import cli, sweep
 from cnt_env.plotting import plot_run, uturn_markers
-from cnt_env.rod.stepper import SimulationError
+from cnt_env.sim.stepper import SimulationError
 
 TINY = ["--preset", "coil", "--Hbar", "30", "--deposit", "6", "--transient", "0"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -1,4 +1,4 @@
-"""Target paths (cnt_env.targets): every family's geometry, determinism given the seed,
+"""Target paths (cnt_env.task.targets): every family's geometry, determinism given the seed,
 the held-out set, and what reset(options={"target": ...}) accepts."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from cnt_env import targets as T
+from cnt_env.task import targets as T
 
 
 def rng(seed: int = 0) -> np.random.Generator:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cnt_env import warmstart
+from cnt_env.sim import warmstart
 from policies import PRETRAINED_DIR, load_policy
 
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from cnt_env.deposition import DepositionSim, default_config
 from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.sim.deposition import DepositionSim, default_config
 
 pytestmark = pytest.mark.slow
 

@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from cnt_env import targets as targets_mod
+from cnt_env.task import targets as targets_mod
 
 __all__ = [
     "CONFIG_DIR",

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from cnt_env import targets as targets_mod
+from cnt_env.task import targets as targets_mod
 
 from .common import CONFIG_DIR, env_settings, limit_threads, load_config, make_env
 

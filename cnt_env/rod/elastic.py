@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .banded import KL, KU
+from cnt_env.rod.banded import KL, KU
 
 _DIAG = KL + KU  # row of the main diagonal in band storage
 

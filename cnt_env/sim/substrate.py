@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rod.stepper import Rod
+from cnt_env.sim.stepper import Rod
 
 SLIDING_OPTIONS = ("B", "C")
 

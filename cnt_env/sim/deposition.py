@@ -1,6 +1,6 @@
 """The deposition simulator: a CNT fed from the top falls onto a substrate and sticks.
 
-:class:`DepositionSim` owns every buffer (through its :class:`~cnt_env.rod.stepper.Rod`)
+:class:`DepositionSim` owns every buffer (through its :class:`~cnt_env.sim.stepper.Rod`)
 and does, after each converged implicit step (physics.md §4):
 
 1. contact: a free contact node that reaches y <= 0 is deposited (its DOFs fixed by the
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .forces import (
+from cnt_env.sim.forces import (
     VDW_BETA0,
     VDW_CLAMP,
     VDW_DELTA,
@@ -31,9 +31,9 @@ from .forces import (
     VDW_NODE,
     vdw_pull,
 )
-from .rod.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
-from .substrate import FlatSticky, Stepped, Substrate
-from .units import DimensionlessParams
+from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
+from cnt_env.sim.substrate import FlatSticky, Stepped, Substrate
+from cnt_env.units import DimensionlessParams
 
 CONTACT_MODES = ("project", "event")
 
@@ -532,24 +532,16 @@ def initial_shape(
     return np.array(pts), np.array(rest)
 
 
-#: Validated defaults per preset (benchmarks/RESULTS.md): mesh, start-up arc radius.
-#: coil: delta = 0.125 near the contact (graded, coarse 1 above) puts R0 at 7.64 L_vb;
-#: serpentine: uniform delta = 1 gives the paper's amplitude and wavelength.
-PRESET_DEFAULTS: dict[str, dict] = {
-    "coil": {"delta_bar": 0.125, "coarse_delta": 1.0, "initial_radius": 6.4},
-    "serpentine": {"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 3.9},
-}
-
-
 def default_config(preset: str, **changes) -> DepositionConfig:
     """The validated configuration of a preset (``units.paper_groups`` groups, mesh and
-    start-up from PRESET_DEFAULTS); ``changes`` go to DimensionlessParams fields or
+    start-up from ``presets.MESH``); ``changes`` go to DimensionlessParams fields or
     DepositionConfig fields, by name."""
     from dataclasses import fields
 
-    from .units import paper_groups
+    from cnt_env.presets import mesh_for
+    from cnt_env.units import paper_groups
 
-    d = PRESET_DEFAULTS[preset]
+    d = mesh_for(preset)
     param_names = {f.name for f in fields(DimensionlessParams)}
     groups = {k: v for k, v in changes.items() if k in param_names}
     rest = {k: v for k, v in changes.items() if k not in param_names}

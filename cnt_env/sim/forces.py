@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .rod.banded import KL, KU
+from cnt_env.rod.banded import KL, KU
 
 _DIAG = KL + KU
 

@@ -2,8 +2,8 @@
 
 The env only translates (style.md 3): actions to a flow, the simulator's state to
 observations, and the trace against the target to rewards. The physics lives in
-:mod:`cnt_env.deposition`; the warm start in :mod:`cnt_env.warmstart`; the targets in
-:mod:`cnt_env.targets`. See :class:`CNTDepositEnv` for the specification.
+:mod:`cnt_env.sim.deposition`; the warm start in :mod:`cnt_env.sim.warmstart`; the targets in
+:mod:`cnt_env.task.targets`. See :class:`CNTDepositEnv` for the specification.
 """
 
 from __future__ import annotations
@@ -16,22 +16,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from . import MAX_EPISODE_STEPS
-from . import targets as targets_mod
-from .deposition import PRESET_DEFAULTS, DepositionConfig, DepositionSim
-from .patterns import MeasureOptions, measure
-from .rod.stepper import SimulationError
-from .targets import Target
-from .units import PAPER_KAPPA_C_BAR, DimensionlessParams, paper_groups
-from .warmstart import flatten_snapshot, unflatten_snapshot, warm_state
+from cnt_env import MAX_EPISODE_STEPS
+from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.presets import DEFAULT_KAPPA_C, ENV_SIM_DEFAULTS, mesh_for
+from cnt_env.sim.deposition import DepositionConfig, DepositionSim
+from cnt_env.sim.stepper import SimulationError
+from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_state
+from cnt_env.task import targets as targets_mod
+from cnt_env.task.targets import Target
+from cnt_env.units import DimensionlessParams, paper_groups
 
 __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 
-#: Simulator settings of the env on the stepped substrate, for speed (benchmarks/RESULTS.md,
-#: serpentine suite): 4x the validated step (amplitude -0.2%, wavelength +4.7% against
-#: dt_factor 0.05; +3.9% against 0.1) and 60 L_vb of deposited tail kept in the solve
-#: instead of 195 (case env_fast).
-ENV_SIM_DEFAULTS: dict[str, Any] = {"dt_factor": 0.2, "tail_length": 60.0}
 #: Default speed cap of the flow, in units of e_v / (mu H) (the paper's range, physics.md §6).
 DEFAULT_VBAR_MAX = 0.13
 #: The default control interval is this many Hbar (time units tau), rounded to whole
@@ -104,7 +100,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     coil on a flat sticky substrate and a serpentine on a stepped one with flow (§5-6).
     The agent sets the rarefied gas flow, in the substrate plane, every control
     interval. The task: make the trace follow a target path (a polyline in the
-    substrate plane that starts at the contact point; :mod:`cnt_env.targets`).
+    substrate plane that starts at the contact point; :mod:`cnt_env.task.targets`).
 
     All quantities are dimensionless (physics.md §2): lengths in L_vb = sqrt(k_b / e_v),
     time in tau = mu L_vb² / e_v, flow speeds v̄ in units of e_v / (mu H).
@@ -186,13 +182,13 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     A warm state per configuration: the simulator after ``warmup_length`` L_vb of trace
     laid from the start-up shape (default H̄, so the suspended rod no longer holds any
     of the artificial initial shape) with the configured flow (``vbar``, ``phi``). It is
-    computed once, cached on disk (:mod:`cnt_env.warmstart`; ``cache_dir``, or
+    computed once, cached on disk (:mod:`cnt_env.sim.warmstart`; ``cache_dir``, or
     ``$CNT_ENV_CACHE_DIR``, or the user cache directory) and restored exactly at every
     reset. Then the simulator advances for a random time, uniform in
     [0, ``reset_advance`` * ``control_interval``), with that flow, and the target (drawn
     from the training ``families`` with ``np_random``, or given by
     ``reset(options={"target": ...})``: a family name, a held-out name, a
-    :class:`~cnt_env.targets.Target`, or an (n, 2) polyline) is placed at the contact
+    :class:`~cnt_env.task.targets.Target`, or an (n, 2) polyline) is placed at the contact
     point.
 
     ## Episode End
@@ -302,7 +298,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.substrate = "flat" if self.params.kappa_c_bar is None else "stepped"
         # the preset's validated start-up radius and mesh, then the env's speed settings
         # (ENV_SIM_DEFAULTS), then the caller's options
-        mesh = PRESET_DEFAULTS[preset]
+        mesh = mesh_for(preset)
         cfg: dict[str, Any] = {"initial_radius": mesh["initial_radius"]}
         if delta_bar is None and mesh["coarse_delta"] is not None:
             cfg["coarse_delta"] = mesh["coarse_delta"]
@@ -866,7 +862,7 @@ def _physics(
                              "substrate='stepped' or drop kappa_c_bar")  # fmt: skip
         overrides["kappa_c_bar"] = None
     else:
-        default = base.kappa_c_bar if base.kappa_c_bar is not None else PAPER_KAPPA_C_BAR
+        default = base.kappa_c_bar if base.kappa_c_bar is not None else DEFAULT_KAPPA_C
         overrides["kappa_c_bar"] = default if kappa_c_bar is None else kappa_c_bar
     return paper_groups(preset, **overrides)
 

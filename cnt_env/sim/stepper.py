@@ -37,9 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..forces import DRAG_LAWS, DRAG_LINEAR, add_linear_drag, add_printed_drag, add_vdw
-from . import elastic, frames
-from .banded import (
+from cnt_env.rod import elastic, frames
+from cnt_env.rod.banded import (
     KL,
     KU,
     LDAB,
@@ -49,6 +48,7 @@ from .banded import (
     band_lu_solve,
     band_zero,
 )
+from cnt_env.sim.forces import DRAG_LAWS, DRAG_LINEAR, add_linear_drag, add_printed_drag, add_vdw
 
 _DIAG = KL + KU
 

@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
-from .io import atomic_savez
+from cnt_env import __version__
+from cnt_env.io import atomic_savez
 
 __all__ = [
     "CACHE_ENV_VAR",
@@ -52,7 +52,7 @@ CACHE_ENV_VAR = "CNT_ENV_CACHE_DIR"
 #: Bump when the file layout changes.
 FORMAT_VERSION = 1
 # Simulator sources whose content enters the cache key (relative to the package).
-_SIM_SOURCES = ("deposition.py", "substrate.py", "forces.py", "units.py", "rod")
+_SIM_SOURCES = ("sim", "rod", "units.py", "presets.py")
 _MANIFEST = "__manifest__"
 _META = "__meta__"
 _CHECKSUM = "__checksum__"
@@ -220,7 +220,7 @@ def default_cache_dir() -> Path:
 
 @functools.cache
 def _source_fingerprint() -> str:
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parent.parent  # the cnt_env package
     h = hashlib.sha256()
     for name in _SIM_SOURCES:
         p = root / name
@@ -276,8 +276,8 @@ def clear_memory_cache() -> None:
 
 
 def _simulate(config: Any, warmup_length: float, seed: int) -> dict[str, Any]:
-    from .deposition import DepositionSim
-    from .rod.stepper import SimulationError
+    from cnt_env.sim.deposition import DepositionSim
+    from cnt_env.sim.stepper import SimulationError
 
     sim = DepositionSim(config, seed=seed)
     p = config.params

@@ -1,0 +1,70 @@
+"""Every per-preset default, in one place (docs/model.md §2, §6).
+
+The paper's dimensionless groups live in :mod:`cnt_env.units` (``PAPER_GROUPS``); this
+module holds what we chose on top of them and validated (benchmarks/RESULTS.md): the
+mesh, the start-up arc, the run lengths the CLI deposits and measures, and the env's
+speed settings. The CLI, the env, sweeps, ``reproduce`` and the benchmarks read these
+tables and override them; none of them keeps a copy.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+from typing import Any
+
+from cnt_env.units import PAPER_KAPPA_C_BAR, PRESETS
+
+__all__ = [
+    "DEFAULT_KAPPA_C",
+    "DEMO_DEPOSIT",
+    "ENV_SIM_DEFAULTS",
+    "INITIAL_RADIUS",
+    "MESH",
+    "PRESETS",
+    "RUN_DEPOSIT",
+    "RUN_TRANSIENT",
+    "mesh_for",
+]
+
+#: Validated mesh and start-up arc per preset. coil: delta = 0.125 near the contact
+#: (graded, coarse 1 above) puts R0 at 7.64 L_vb; serpentine: uniform delta = 1 gives the
+#: paper's amplitude and wavelength at the baseline.
+MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
+    "coil": MappingProxyType({"delta_bar": 0.125, "coarse_delta": 1.0, "initial_radius": 6.4}),
+    "serpentine": MappingProxyType(
+        {"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 3.9}
+    ),
+})  # fmt: skip
+
+#: Start-up contact arc radius R_i by substrate (~0.5 um: 6.4 L_vb flat, 3.9 stepped),
+#: used when ``--substrate`` swaps the preset's substrate.
+INITIAL_RADIUS: MappingProxyType[str, float] = MappingProxyType({"flat": 6.4, "stepped": 3.9})
+
+#: Critical curvature kappa_c L_vb that turns steps on when a flat preset is run stepped.
+DEFAULT_KAPPA_C: float = PAPER_KAPPA_C_BAR
+
+#: Trace length (L_vb) a run deposits when ``--deposit`` is not given. Coil: clean circles
+#: follow a start-up of 200-500 L_vb. Serpentine: about 10 cycles of ~70 L_vb each after
+#: the transient, for the periodicity test.
+RUN_DEPOSIT: MappingProxyType[str, float] = MappingProxyType({"coil": 800.0, "serpentine": 1500.0})
+#: Start-up length dropped before measuring (coils are clean after 200-300 L_vb at the
+#: validated mesh, serpentines after ~150).
+RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 300.0, "serpentine": 150.0})
+#: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
+DEMO_DEPOSIT: float = 300.0
+
+#: Simulator settings of the env on the stepped substrate, for speed (RESULTS.md,
+#: serpentine suite, case env_fast): 4x the validated step (amplitude -0.2%, wavelength
+#: +4.7%) and 60 L_vb of deposited tail kept in the solve instead of 195.
+ENV_SIM_DEFAULTS: MappingProxyType[str, Any] = MappingProxyType(
+    {"dt_factor": 0.2, "tail_length": 60.0}
+)
+
+assert set(MESH) == set(PRESETS) == set(RUN_DEPOSIT) == set(RUN_TRANSIENT)
+
+
+def mesh_for(preset: str) -> dict[str, Any]:
+    """A fresh copy of ``MESH[preset]`` (raises ValueError on an unknown preset)."""
+    if preset not in MESH:
+        raise ValueError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    return dict(MESH[preset])
