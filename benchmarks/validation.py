@@ -1,4 +1,4 @@
-"""Physics validation of the paper's baselines (physics.md §6), one suite each:
+"""Physics validation of the paper's baselines (docs/model.md §6), one suite each:
 
 * ``coil`` (issue 3): R0 against the paper's 7.64 L_vb, its convergence in delta and dt,
   independence of the start-up radius R_i, the drag-law option, and the physical sanity

@@ -59,7 +59,7 @@ EXIT_FAILED = 1  # the simulation or the measurement failed
 EXIT_USAGE = 2  # bad input: argparse's code too
 
 #: Trace length (L_vb) a run deposits when --deposit is not given. Coil: clean circles
-#: follow a start-up of 200-500 L_vb (physics.md §6). Serpentine: about 10 cycles of
+#: follow a start-up of 200-500 L_vb (docs/model.md §6). Serpentine: about 10 cycles of
 #: ~70 L_vb each (amplitude ~30) after the transient, for the periodicity test (§7).
 #: start-up length dropped before measuring, per preset (coils are clean after 200-300
 #: L_vb at the validated mesh, serpentines after ~150: benchmarks/RESULTS.md)
@@ -70,7 +70,7 @@ EXIT_USAGE = 2  # bad input: argparse's code too
 DRAG_LAWS = ("linear", "printed")
 CONTACT_MODES = ("event", "project")
 SLIDING_OPTIONS = ("B", "C")
-#: start-up contact arc radius R_i (physics.md §4: ~0.5 um, 6.4 L_vb flat, 3.9 stepped)
+#: start-up contact arc radius R_i (docs/model.md §4: ~0.5 um, 6.4 L_vb flat, 3.9 stepped)
 
 # Dimensionless groups settable on the command line: argparse dest -> field.
 GROUP_FIELDS: dict[str, str] = {
@@ -461,7 +461,8 @@ def _output_path(value: str | None, flag: str) -> Path | None:
 
 
 def write_config_json(path: Path, resolved: Mapping[str, Any]) -> Path:
-    """Write the resolved config next to an output: ``<path>.json`` (style.md item 12)."""
+    """Write the resolved config next to an output: ``<path>.json``
+    (docs/architecture.md rule 12)."""
     out = Path(f"{path}.json")
     text = json.dumps(to_jsonable({**resolved, "output": str(path)}), indent=2, allow_nan=False)
     out.write_text(text + "\n")

@@ -1,14 +1,14 @@
 """Measurements of a deposited trace: coil radius, serpentine amplitude and
-wavelength, loops, and the pattern class (physics.md §7).
+wavelength, loops, and the pattern class (docs/model.md §7).
 
 A *trace* is an ``(n, 2)`` float array of points ``(x, z)`` in the substrate
 plane, ordered by deposition (arc length increasing), in units of L_vb. The
 simulator's ``(n, 3)`` points ``(x, y=0, z)`` are accepted too; ``y`` is dropped.
-The steps of the stepped substrate run along z (physics.md §5), so U-turns are
+The steps of the stepped substrate run along z (docs/model.md §5), so U-turns are
 extrema of z and a serpentine progresses across z (along x for the paper's flow).
 
 Every measurement that takes :class:`MeasureOptions` first drops the start-up
-transient (``transient_length`` of arc length, physics.md §7) and returns point
+transient (``transient_length`` of arc length, docs/model.md §7) and returns point
 indices into the trace *as passed in*, so they can index it directly.
 
 Conventions (fixed here, used everywhere):
@@ -23,7 +23,7 @@ Conventions (fixed here, used everywhere):
   ``A sin(.)`` has amplitude ``A``); the full distance is reported as
   ``peak_to_peak``. A serpentine with straight runs of length ``L`` along z,
   joined by semicircles of diameter ``lambda / 2``, has peak-to-peak
-  ``L + lambda / 2``. [Choice] physics.md §7 words the amplitude as "the z
+  ``L + lambda / 2``. [Choice] docs/model.md §7 words the amplitude as "the z
   distance between successive opposite U-turns"; read literally that is the
   peak-to-peak value, which on our serpentine baseline is twice the paper's
   Abar ~ 30, while the conventional half matches it (benchmarks/RESULTS.md).
@@ -35,7 +35,7 @@ Conventions (fixed here, used everywhere):
   sampling, and insensitive to where noise puts the extreme sample on a
   rounded top.
 * **Cycles**: ``n_cycles = (n_uturns - 1) // 2``; one cycle is two half-cycles.
-* **Loops** (physics.md §7): the tangent turns by 2 pi or more between
+* **Loops** (docs/model.md §7): the tangent turns by 2 pi or more between
   successive U-turns (``n_loops``; a tolerance of ``LOOP_TURNING_TOLERANCE``
   absorbs noise and the tangent at the U-turn), or the trace crosses itself
   (``n_self_crossings``, adjacent segments excluded).
@@ -71,7 +71,7 @@ __all__ = [
     "uturns",
 ]
 
-#: Pattern classes returned by :func:`classify` (physics.md §7, plus two fall-backs).
+#: Pattern classes returned by :func:`classify` (docs/model.md §7, plus two fall-backs).
 PATTERNS: tuple[str, ...] = (
     "coil",
     "serpentine-coil",
@@ -144,14 +144,14 @@ def _check_int(name: str, value: Any) -> None:
 
 @dataclass(frozen=True)
 class MeasureOptions:
-    """How a trace is measured (physics.md §7). Lengths in L_vb.
+    """How a trace is measured (docs/model.md §7). Lengths in L_vb.
 
     The first six fields are the documented interface; the last five tune the
     classifier and the cost bound and rarely need changing.
 
     Attributes:
         transient_length: arc length dropped from the start of the trace before
-            anything is measured (the start-up transient, physics.md §6 "Start-up").
+            anything is measured (the start-up transient, docs/model.md §6 "Start-up").
         coil_window_turns: length of a coil-fit window, in turns of the trace.
         coil_max_rel_residual: a window is rejected when the RMS radial residual
             of its circle fit exceeds this fraction of the fitted radius.
@@ -226,7 +226,7 @@ def _plane(trace: ArrayLike, min_points: int = 2) -> FloatArray:
 
 
 def arc_length(trace: ArrayLike) -> FloatArray:
-    """Cumulative arc length at each point, starting at 0 (physics.md §7), shape ``(n,)``."""
+    """Cumulative arc length at each point, starting at 0 (docs/model.md §7), shape ``(n,)``."""
     p = _plane(trace)
     s = np.empty(p.shape[0])
     s[0] = 0.0
@@ -235,7 +235,7 @@ def arc_length(trace: ArrayLike) -> FloatArray:
 
 
 def drop_transient(trace: ArrayLike, length: float) -> NDArray[np.float64]:
-    """The trace from the first point at arc length >= ``length`` on (physics.md §7).
+    """The trace from the first point at arc length >= ``length`` on (docs/model.md §7).
 
     The columns are kept as given ((n, 2) or (n, 3)). Raises ValueError when
     nothing would be left.
@@ -373,7 +373,7 @@ def _fit_circles(
 
 
 def fit_circle(points: ArrayLike) -> tuple[float, float, float, float]:
-    """Algebraic least-squares circle through ``points`` (physics.md §7, "Coil radius").
+    """Algebraic least-squares circle through ``points`` (docs/model.md §7, "Coil radius").
 
     Uses Taubin's fit (in Chernov's SVD form) rather than Kasa's: Kasa's
     minimises the algebraic distance with no normalisation and is biased towards
@@ -480,7 +480,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
 
 
 def coil_radius(trace: ArrayLike, options: MeasureOptions | None = None) -> dict[str, Any]:
-    """Coil radius from circle fits over sliding windows (physics.md §7, "Coil radius").
+    """Coil radius from circle fits over sliding windows (docs/model.md §7, "Coil radius").
 
     The window is ``coil_window_turns`` turns long, a turn being the arc length
     over which the tangent turns by 2 pi on median (from the windowed turning
@@ -564,7 +564,7 @@ def _cap_centres(p: FloatArray, idx: IntArray, side: IntArray, depth: float) -> 
 
 def uturns(trace: ArrayLike, options: MeasureOptions | None = None) -> dict[str, Any]:
     """U-turns: extrema of z against arc length with prominence >= ``uturn_prominence``
-    (physics.md §7, "Serpentine amplitude and wavelength").
+    (docs/model.md §7, "Serpentine amplitude and wavelength").
 
     Maxima and minima come from ``scipy.signal.find_peaks`` on z and -z, merged
     in trace order; of two same-side extrema in a row only the more extreme is
@@ -642,7 +642,7 @@ def serpentine_measures(
     options: MeasureOptions | None = None,
     flow_direction: ArrayLike | None = (1.0, 0.0),
 ) -> dict[str, Any]:
-    """Serpentine amplitude and wavelength from the U-turns (physics.md §7).
+    """Serpentine amplitude and wavelength from the U-turns (docs/model.md §7).
 
     Amplitude: median |dz| / 2 between successive (opposite) U-turns (``peak_to_peak``
     is the median |dz|). Wavelength:
@@ -789,7 +789,7 @@ def _finish(found: list[IntArray], seg_ids: IntArray, empty: IntArray) -> IntArr
 def self_crossings(
     trace: ArrayLike, max_candidate_pairs: int = _DEFAULT_OPTIONS.crossing_pair_budget
 ) -> tuple[IntArray, bool]:
-    """Pairs of non-adjacent segments of the whole trace that cross (physics.md §7, loops).
+    """Pairs of non-adjacent segments of the whole trace that cross (docs/model.md §7, loops).
 
     Segment ``i`` joins points ``i`` and ``i + 1``. Grid-hashed, about
     O(n log n + candidates). No transient is dropped here. Returns ``(pairs,
@@ -817,7 +817,7 @@ def _loops(m: _Measured, options: MeasureOptions, u: dict[str, Any]) -> dict[str
 
 
 def has_loops(trace: ArrayLike, options: MeasureOptions | None = None) -> dict[str, Any]:
-    """Loops of a serpentine-coil (physics.md §7, "Pattern class").
+    """Loops of a serpentine-coil (docs/model.md §7, "Pattern class").
 
     Two independent counts on the measured trace: ``n_loops``, full turns of the
     tangent between successive U-turns (also from the start to the first and
@@ -888,7 +888,7 @@ def measure(
     substrate: str = "flat",
     flow_direction: ArrayLike | None = (1.0, 0.0),
 ) -> dict[str, Any]:
-    """Every measurement of physics.md §7 on the trace, as a JSON-friendly dict.
+    """Every measurement of docs/model.md §7 on the trace, as a JSON-friendly dict.
 
     ``substrate`` is ``"flat"`` or ``"stepped"`` (see :func:`classify`);
     ``flow_direction`` is the direction of progression for the wavelength
@@ -945,7 +945,7 @@ def classify(
     substrate: str = "flat",
     flow_direction: ArrayLike | None = (1.0, 0.0),
 ) -> str:
-    """Pattern class of the measured trace (physics.md §7, "Pattern class").
+    """Pattern class of the measured trace (docs/model.md §7, "Pattern class").
 
     Rules, in order (the first that holds wins):
 

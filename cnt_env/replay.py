@@ -1,6 +1,6 @@
 """Replay: log episodes and simulations to rerun (an optional dependency).
 
-Replay is decoupled from the simulation (style.md 13). The simulation side records
+Replay is decoupled from the simulation (docs/architecture.md rule 13). The simulation side records
 plain arrays (:class:`EpisodeBuffer`, the episode file of :func:`save_episode`, the trace
 file of :mod:`cnt_env.io`) as :class:`Frame` s; one logger turns frames into a rerun
 recording, either frame by frame (a live viewer) or column by column (``send_columns``,

@@ -1,6 +1,6 @@
 """Physical parameters (SI) and the dimensionless groups the simulator runs on.
 
-This is the only module that knows about SI (physics.md §2). Everything inside
+This is the only module that knows about SI (docs/model.md §2). Everything inside
 the simulator is nondimensional, with
 
 ================  ==============================  ==========================
@@ -44,19 +44,19 @@ __all__ = [
 ]
 
 # Discretisation length in L_vb. Provisional: the delta-convergence study
-# (physics.md §6, "Facts") may change it.
+# (docs/model.md §6, "Facts") may change it.
 DEFAULT_DELTA_BAR = 1.0
 
 # Tube radius in L_vb when only groups are given. It enters only the theta
-# inertia (physics.md §3), which is negligible; the presets give 0.011-0.017.
+# inertia (docs/model.md §3), which is negligible; the presets give 0.011-0.017.
 DEFAULT_R0_BAR = 0.015
 
-# Free-molecular drag coefficients (physics.md §2, paper eq. 2): diffuse
+# Free-molecular drag coefficients (docs/model.md §2, paper eq. 2): diffuse
 # reflection sigma = 1 and C_sigma = 2.29.
 DEFAULT_SIGMA = 1.0
 DEFAULT_C_SIGMA = 2.29
 
-# --- The paper's baseline values (physics.md §2), SI -----------------------
+# --- The paper's baseline values (docs/model.md §2), SI -----------------------
 PAPER_R0 = 1.356e-9  # m, a (20,20) tube
 PAPER_H = 20e-6  # m
 PAPER_RHO = 8.1e-15  # kg/m, mass per length
@@ -233,7 +233,7 @@ class PhysicalParams:
                 ),
             )
 
-    # --- units (physics.md §2) ----------------------------------------------
+    # --- units (docs/model.md §2) ----------------------------------------------
     @property
     def L_vb(self) -> float:
         """Length unit, the vdW-bending length sqrt(k_b / e_v) [m]."""
@@ -337,7 +337,7 @@ class PhysicalParams:
 
 @dataclass(frozen=True, kw_only=True)
 class DimensionlessParams:
-    """The dimensionless groups of physics.md §2: what the simulator takes.
+    """The dimensionless groups of docs/model.md §2: what the simulator takes.
 
     Lengths are in L_vb, forces in e_v, times in tau = mu L_vb^2 / e_v.
 
@@ -442,7 +442,7 @@ class DimensionlessParams:
             _check_positive(own, "r0_bar", self.r0_bar, "L_vb", "pass the tube radius r0 / L_vb"),
         )
 
-    # --- coefficients in internal units (physics.md §2) ------------------------
+    # --- coefficients in internal units (docs/model.md §2) ------------------------
     @property
     def bend_stiffness(self) -> float:
         """k_b in internal units: 1 by the choice of units."""
@@ -472,7 +472,7 @@ class DimensionlessParams:
 
     @property
     def theta_inertia_per_length(self) -> float:
-        """Rotational inertia of the material angle per length, rho r0^2 / 2 (physics.md §3)."""
+        """Rotational inertia of the material angle per length, rho r0^2 / 2 (docs/model.md §3)."""
         return 0.5 * self.Ibar * self.r0_bar**2
 
     @property
@@ -506,7 +506,7 @@ class DimensionlessParams:
 
 
 def preset(name: str, *, delta_bar: float = DEFAULT_DELTA_BAR) -> PhysicalParams:
-    """The paper's baseline parameters (physics.md §2), in SI.
+    """The paper's baseline parameters (docs/model.md §2), in SI.
 
     * ``"coil"``: flat sticky graphite, no flow (H̄ ~ 253, Ī ~ 2200).
     * ``"serpentine"``: stepped substrate, flow along +x with v̄ = 0.037 and
@@ -551,7 +551,7 @@ def preset(name: str, *, delta_bar: float = DEFAULT_DELTA_BAR) -> PhysicalParams
     )
 
 
-# The paper's own dimensionless groups (physics.md §2 table). The simulator's presets use
+# The paper's own dimensionless groups (docs/model.md §2 table). The simulator's presets use
 # these, because the results to reproduce (R0 = 7.64 L_vb, serpentine amplitude and
 # wavelength) are quoted at exactly these values; the SI presets above give groups within
 # 1-3% of them (see preset()).

@@ -1,5 +1,5 @@
 """Small helpers shared by the rod tests: random rods and energy/force/Hessian evaluation
-with frames time-parallel-transported from a frozen state (physics.md §3)."""
+with frames time-parallel-transported from a frozen state (docs/model.md §3)."""
 
 from __future__ import annotations
 

@@ -98,7 +98,7 @@ def test_graded_mesh_splits_near_contact_and_lays_fine_trace() -> None:
 
 
 def test_si_input_with_kb_times_ten_gives_the_same_trace() -> None:
-    """physics.md §6 invariance: k_b x10 with H and rho rescaled to keep Hbar and Ibar
+    """docs/model.md §6 invariance: k_b x10 with H and rho rescaled to keep Hbar and Ibar
     gives the same trace in L_vb units."""
     base = PhysicalParams(
         k_b=2.7e-24, k_s=2.9e-6, k_t=2.7e-24, e_v=4.39e-10, rho=8.1e-15, mu=5.11e-7,

@@ -1,5 +1,5 @@
 """Finite-difference checks of every elastic force against its energy and every Hessian
-against its force (physics.md §3, mandatory), on random 5-8 node rods.
+against its force (docs/model.md §3, mandatory), on random 5-8 node rods.
 
 Frames are time-parallel-transported from the frozen start-of-step state, which is the
 configuration itself (as at the first Newton iterate). Central differences with step

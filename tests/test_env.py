@@ -1,4 +1,4 @@
-"""The CNTDeposit-v0 contract (style.md 11, design.md "The environment"): checkers,
+"""The CNTDeposit-v0 contract (docs/architecture.md rule 11; docs/task.md): checkers,
 bit-identical same-seed rollouts, pickling, action clipping and rejection, the reward
 decomposition, vector envs, the warm-start cache, and a hypothesis fuzz.
 

@@ -1,4 +1,4 @@
-"""Trace measurements (physics.md §7) on synthetic traces with known answers."""
+"""Trace measurements (docs/model.md §7) on synthetic traces with known answers."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ SERPENTINE_REL = 0.02  # amplitude and wavelength vs the construction
 EXACT_AMPLITUDE_REL = 2e-3  # peak-to-peak vs run + lambda/2 (apex within spacing/2)
 FIT_EXACT = 1e-9  # circle fit of points exactly on a circle
 
-R0_BAR = 7.64  # the paper's coil radius (physics.md §6)
+R0_BAR = 7.64  # the paper's coil radius (docs/model.md §6)
 A_BAR, LAMBDA_BAR = 30.0, 7.0  # the paper's serpentine amplitude and wavelength
 
 

@@ -1,4 +1,4 @@
-"""Rerun replay (cnt_env.replay, design.md "Replay", style.md 13).
+"""Rerun replay (cnt_env.replay, docs/architecture.md "Replay", docs/architecture.md rule 13).
 
 Recordings are written to temporary ``.rrd`` files and read back with
 ``rerun.chunk.RrdReader``: the recording id, the entity paths, one row per frame,

@@ -1,4 +1,4 @@
-"""Analytic cases for the DER core and the Newton stepper (physics.md §8, rung 2)."""
+"""Analytic cases for the DER core and the Newton stepper (docs/model.md §8, rung 2)."""
 
 from __future__ import annotations
 

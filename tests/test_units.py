@@ -45,7 +45,7 @@ def assert_groups_equal(a: DimensionlessParams, b: DimensionlessParams) -> None:
             assert x == pytest.approx(y, rel=EXACT_REL, abs=1e-300), name
 
 
-# --- the paper's table (physics.md §2) ---------------------------------------
+# --- the paper's table (docs/model.md §2) ---------------------------------------
 # (preset, group, paper value, relative tolerance). The tolerance is the
 # rounding of the quoted 2-3 significant digits. The paper's H̄ values (253, 155)
 # are not the H / L_vb of its own inputs to 3 digits (we get 255.0 and 155.9):
@@ -101,7 +101,7 @@ def test_presets_substrate_and_flow() -> None:
     assert coil.vbar == 0.0 and coil.flow_velocity == (0.0, 0.0, 0.0)
     serp = preset("serpentine").to_dimensionless()
     assert serp.is_stepped
-    # Flow along +x at vbar / Hbar in internal units (physics.md §2).
+    # Flow along +x at vbar / Hbar in internal units (docs/model.md §2).
     vx, vy, vz = serp.flow_velocity
     assert vx == pytest.approx(0.037 / serp.Hbar, rel=EXACT_REL)
     assert vy == 0.0 and vz == 0.0
@@ -155,7 +155,7 @@ def test_fields_are_frozen_floats() -> None:
         p.k_b = 1.0  # type: ignore[misc]
 
 
-# --- invariance (physics.md §6) ---------------------------------------------------
+# --- invariance (docs/model.md §6) ---------------------------------------------------
 def rescale_keeping_groups(p: PhysicalParams, kb_factor: float) -> PhysicalParams:
     """Multiply k_b, and rescale the rest so that every group stays the same."""
     length_factor = math.sqrt(kb_factor)  # L_vb = sqrt(k_b / e_v)

@@ -1,4 +1,4 @@
-"""Paper-scale physics validations (physics.md §6). Slow: minutes each, so they run with
+"""Paper-scale physics validations (docs/model.md §6). Slow: minutes each, so they run with
 ``make test-all`` (``pytest -m slow``), not in CI. The full convergence studies, with
 their recorded numbers, are ``benchmarks/validation.py`` (benchmarks/RESULTS.md)."""
 

@@ -4,7 +4,7 @@ Conventions shared by every module in this package (one layout everywhere):
 
 * ``n_nodes`` nodes x_0 .. x_{n_nodes-1}; ``n_edges = n_nodes - 1``; edge j joins
   x_j and x_{j+1} and carries the material angle theta_j.
-* The DOF vector interleaves them (physics.md §3):
+* The DOF vector interleaves them (docs/model.md §3):
   ``q = [x0 y0 z0 th0 x1 y1 z1 th1 ... x_{N-1} y_{N-1} z_{N-1}]``,
   so ``n_dof = 4 * n_nodes - 1``; node i lives at ``q[4i:4i+3]``, edge j's
   angle at ``q[4j+3]``.

@@ -1,4 +1,4 @@
-"""Stretching, bending and twisting: energies, forces and Hessians (physics.md §3).
+"""Stretching, bending and twisting: energies, forces and Hessians (docs/model.md §3).
 
 Formulas: Bergou et al. 2010 (forces) and Jawed, Novelia & O'Reilly, "A primer on the
 kinematics of discrete elastic rods" (2018) (curvature and twist Hessians).

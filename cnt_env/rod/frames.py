@@ -1,4 +1,4 @@
-"""Frames and strains of the discrete elastic rod (physics.md §3; Bergou et al. 2010).
+"""Frames and strains of the discrete elastic rod (docs/model.md §3; Bergou et al. 2010).
 
 Arrays (see ``cnt_env/rod/__init__.py`` for the shared layout):
 
@@ -103,7 +103,7 @@ def time_parallel_frames(
 ) -> None:
     """Reference directors by time-parallel transport from the frame frozen at step start.
 
-    Always transports from the *start-of-step* frame (physics.md §3), never from the
+    Always transports from the *start-of-step* frame (docs/model.md §3), never from the
     previous Newton iterate, then re-orthonormalises.
     """
     for j in range(n_edges):
@@ -128,7 +128,7 @@ def reference_twist(
     n_nodes: int,
     ref_twist: np.ndarray,
 ) -> None:
-    """Reference twist at interior nodes, updated incrementally (physics.md §3).
+    """Reference twist at interior nodes, updated incrementally (docs/model.md §3).
 
     Transport d1_{i-1} onto t_i, rotate it about t_i by the old reference twist, and
     add the signed angle from there to d1_i. Incremental, so no 2 pi jumps.

@@ -1,7 +1,7 @@
 """The deposition simulator: a CNT fed from the top falls onto a substrate and sticks.
 
 :class:`DepositionSim` owns every buffer (through its :class:`~cnt_env.sim.stepper.Rod`)
-and does, after each converged implicit step (physics.md §4):
+and does, after each converged implicit step (docs/model.md §4):
 
 1. contact: a free contact node that reaches y <= 0 is deposited (its DOFs fixed by the
    substrate); a new contact edge flatter than ``beta0_min`` is deposited at once;
@@ -40,7 +40,7 @@ CONTACT_MODES = ("project", "event")
 
 @dataclass(frozen=True)
 class ContactOptions:
-    """Contact and vdW guards (physics.md §4). Each option has one home, here.
+    """Contact and vdW guards (docs/model.md §4). Each option has one home, here.
 
     * ``mode``: ``"event"`` (default) locates touchdown: a step that takes the contact
       node below ``-event_tol * delta * sin(beta0)`` is rewound and retaken with the step length
@@ -76,7 +76,7 @@ class DepositionConfig:
     "C") and ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
     serpentine preset) apply to the stepped one (substrate.py).
 
-    Graded discretisation [choice, physics.md §6]: with ``coarse_delta`` set, edges are
+    Graded discretisation [choice, docs/model.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
     come within ``fine_length`` (arc length) of the contact node, where the curvature
     lives. ``None`` keeps the rod uniform at ``delta_bar``.
@@ -230,7 +230,7 @@ class DepositionSim:
 
     def _settle_contact(self) -> None:
         """Deposit contact nodes that are down (or whose edge is already flat), then arm
-        the vdW force on the new contact node with its beta0 (physics.md §4)."""
+        the vdW force on the new contact node with its beta0 (docs/model.md §4)."""
         cfg = self.config.contact
         rod = self.rod
         armed = self.contact_node
@@ -255,7 +255,7 @@ class DepositionSim:
         rod.vdw[VDW_BETA0] = self.beta0
 
     def _inject(self) -> None:
-        """Append nodes at the free top while it is below H - delta (physics.md §4)."""
+        """Append nodes at the free top while it is below H - delta (docs/model.md §4)."""
         rod = self.rod
         while True:
             n = rod.n_nodes
@@ -504,7 +504,7 @@ def initial_shape(
     coarse_delta: float | None = None,
     fine_length: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Start-up state (physics.md §4): a node on the substrate behind the origin, an arc
+    """Start-up state (docs/model.md §4): a node on the substrate behind the origin, an arc
     of radius R_i from flat to vertical, then a vertical straight part up to y = height.
     Consecutive nodes are exactly delta apart (chords); with ``coarse_delta``, spacing
     switches to it once the arc length from the origin exceeds ``fine_length``.

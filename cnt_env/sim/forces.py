@@ -4,14 +4,14 @@
 Both kernels *add* the force to ``force`` and *add* -dF/dq (the contribution to the
 residual Jacobian) to the band ``ab``.
 
-Drag (physics.md §4), per unit length on edge j with unit tangent t:
+Drag (docs/model.md §4), per unit length on edge j with unit tangent t:
 
     F_a = mu [sigma t t^T + C_sigma (I - t t^T)] v_r = mu A(t) v_r,
     v_r = v_flow - (u_j + u_{j+1}) / 2,  u = (q - q_n) / dt  (implicit Euler velocity),
 
 with A = C_sigma I + (sigma - C_sigma) t t^T. The edge force ebar_j F_a (ebar = rest length)
 is split half to each node. The Jacobian has the velocity part -ebar mu A / (4 dt) per node
-pair (physics.md §4) and, because A depends on the tangent, a geometric part
+pair (docs/model.md §4) and, because A depends on the tangent, a geometric part
 ebar mu (sigma - C_sigma) [(t.v_r) I + t v_r^T] (I - t t^T) / |e| / 2 per node, with
 the sign of d t / d x (- for x_j, + for x_{j+1}). Both are included, so Newton stays
 quadratic even when the drag dominates (the crossflow benchmark).
@@ -177,7 +177,7 @@ def add_printed_drag(
     ab: np.ndarray,
     with_jacobian: bool,
 ) -> None:
-    """Drag with the paper's printed angle factors (physics.md §4, [choice]):
+    """Drag with the paper's printed angle factors (docs/model.md §4, [choice]):
 
         F_a = mu [sigma cos(alpha) (v_r.t) t + C_sigma sin(alpha) (v_r - (v_r.t) t)],
 

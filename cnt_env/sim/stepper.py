@@ -1,4 +1,4 @@
-"""Implicit-Euler Newton stepper for the discrete elastic rod (physics.md §3).
+"""Implicit-Euler Newton stepper for the discrete elastic rod (docs/model.md §3).
 
 Residual (per DOF), with u = (q - q_n)/dt:
 
@@ -217,7 +217,7 @@ def assemble(
             rhs[k] = 0.0
             band_fix_dof(ab, n_dof, k)
             continue
-        r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # physics.md §3
+        r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # docs/model.md §3
         ab[_DIAG, k] += mass[k] * inv_dt2
         rhs[k] = -r
         if not abs(r) <= res:  # also catches NaN
@@ -416,7 +416,7 @@ class Rod:
         self.max_nodes = cap
 
     def append_node(self, position: np.ndarray, velocity: np.ndarray, rest_length: float) -> None:
-        """Add a node after the last one (injection at the free top, physics.md §4).
+        """Add a node after the last one (injection at the free top, docs/model.md §4).
 
         The new edge gets theta and the reference director of the last edge transported
         onto its tangent, so it starts untwisted; the new interior node has zero
@@ -494,7 +494,7 @@ class Rod:
         self.update_mass()
 
     def drop_front(self, k: int) -> None:
-        """Remove the first k nodes (deletion of the far deposited tail, physics.md §4)."""
+        """Remove the first k nodes (deletion of the far deposited tail, docs/model.md §4)."""
         if k <= 0:
             return
         n = self.n_nodes
@@ -537,7 +537,7 @@ class Rod:
         self.fixed[4 * j + 3] = fixed
 
     def update_mass(self) -> None:
-        """Lumped masses from rest lengths: node rho * Voronoi length (physics.md §3)."""
+        """Lumped masses from rest lengths: node rho * Voronoi length (docs/model.md §3)."""
         n = self.n_nodes
         rl = self.rest_lengths[: n - 1]
         vor = self.voronoi_lengths

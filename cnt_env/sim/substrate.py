@@ -1,4 +1,4 @@
-"""Substrates: what happens to a node once it is deposited (physics.md §5).
+"""Substrates: what happens to a node once it is deposited (docs/model.md §5).
 
 A substrate decides which DOFs of a deposited node stay free, which deposited nodes stay
 in the solve, and whether deposited edges reorient after a step. The simulator
@@ -45,7 +45,7 @@ class FlatSticky:
 
 @dataclass(frozen=True)
 class Stepped:
-    """Substrate with steps along z (serpentines), physics.md §5.
+    """Substrate with steps along z (serpentines), docs/model.md §5.
 
     A deposited node keeps y = 0 and slides along the steps (z). A deposited edge e
     snaps into the steps when |e.x| < kappa_c delta |e.z| (the small-angle form of

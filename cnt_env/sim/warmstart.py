@@ -1,5 +1,5 @@
 """Warm start for ``CNTDeposit-v0``: a post-transient simulator state per configuration,
-computed once and cached on disk (design.md, "Start").
+computed once and cached on disk (docs/architecture.md, "Start").
 
 * :func:`warm_state` returns a :meth:`DepositionSim.snapshot` taken after
   ``warmup_length`` L_vb of trace has been laid from the start-up shape. It looks in a

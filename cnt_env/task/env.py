@@ -1,6 +1,6 @@
 """``CNTDeposit-v0``: steer the gas flow so that a depositing CNT lays a target path.
 
-The env only translates (style.md 3): actions to a flow, the simulator's state to
+The env only translates (docs/architecture.md rule 3): actions to a flow, the simulator's state to
 observations, and the trace against the target to rewards. The physics lives in
 :mod:`cnt_env.sim.deposition`; the warm start in :mod:`cnt_env.sim.warmstart`; the targets in
 :mod:`cnt_env.task.targets`. See :class:`CNTDepositEnv` for the specification.
@@ -28,7 +28,7 @@ from cnt_env.units import DimensionlessParams, paper_groups
 
 __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 
-#: Default speed cap of the flow, in units of e_v / (mu H) (the paper's range, physics.md §6).
+#: Default speed cap of the flow, in units of e_v / (mu H) (the paper's range, docs/model.md §6).
 DEFAULT_VBAR_MAX = 0.13
 #: The default control interval is this many Hbar (time units tau), rounded to whole
 #: physics steps: about 1 L_vb of trace, since the deposition speed is ~0.65 / Hbar.
@@ -96,13 +96,13 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     A carbon nanotube (CNT), modelled as a discrete elastic rod of height H̄, is fed from
     the top and falls onto a substrate (the x-z plane, y up), where van der Waals
-    adhesion makes it stick (physics.md §1, §4). The shape it leaves, the *trace*, is a
+    adhesion makes it stick (docs/model.md §1, §4). The shape it leaves, the *trace*, is a
     coil on a flat sticky substrate and a serpentine on a stepped one with flow (§5-6).
     The agent sets the rarefied gas flow, in the substrate plane, every control
     interval. The task: make the trace follow a target path (a polyline in the
     substrate plane that starts at the contact point; :mod:`cnt_env.task.targets`).
 
-    All quantities are dimensionless (physics.md §2): lengths in L_vb = sqrt(k_b / e_v),
+    All quantities are dimensionless (docs/model.md §2): lengths in L_vb = sqrt(k_b / e_v),
     time in tau = mu L_vb² / e_v, flow speeds v̄ in units of e_v / (mu H).
 
     ## Action Space
@@ -314,7 +314,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.vbar_max = _positive("vbar_max", vbar_max)
         if self.params.vbar > self.vbar_max:
             raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max = {self.vbar_max}")
-        # control interval (tau) and the derived number of physics steps (style.md 4)
+        # control interval (tau) and the derived number of physics steps
+        # (docs/architecture.md rule 4)
         self.dt = self.config.time_step
         if control_interval is None:
             n = max(1, round(CONTROL_INTERVAL_HBAR * self.params.Hbar / self.dt))

@@ -1,7 +1,7 @@
 """Target circuit paths for ``CNTDeposit-v0``: polylines in the substrate plane.
 
 A target is an ``(n, 2)`` float64 polyline of points ``(x, z)`` in L_vb, in the
-substrate plane (physics.md §1: the substrate is the x-z plane, the steps of the
+substrate plane (docs/model.md §1: the substrate is the x-z plane, the steps of the
 stepped substrate run along z). Every target starts at the origin; the env translates
 it so that it starts at the contact point at reset. Curved pieces are sampled at most
 ``CURVE_SPACING`` apart, so the polyline itself is the path (no spline underneath).
@@ -26,7 +26,7 @@ family          shape
 The ``HELD_OUT`` targets are fixed, named, and never drawn by :func:`sample`: they are
 for evaluation only. Most are shapes no family produces (S-curve, hairpin, square-wave
 meander, spiral, jog); ``paper_serpentine`` is the paper's baseline serpentine
-(A = 30, lambda = 7, physics.md §6; two periods), progressing along +x, across the
+(A = 30, lambda = 7, docs/model.md §6; two periods), progressing along +x, across the
 steps.
 
 :func:`resolve` turns what ``reset(options={"target": ...})`` accepts (a
