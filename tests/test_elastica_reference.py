@@ -1,17 +1,11 @@
 """Tests of the steady elastica reference for the CNT-in-crossflow anchor."""
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-try:
-    from benchmarks import elastica_reference as er
-except ImportError:  # running without the repo root on sys.path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from benchmarks import elastica_reference as er
+from benchmarks import elastica_reference as er  # the repo root is on pytest's pythonpath
 
 L = 20e-6
 K_B = 2.7e-24

@@ -14,7 +14,7 @@ computed once and cached on disk (docs/architecture.md, "Start").
   belongs to another key or fails its checksum is rebuilt. Writes are atomic (a
   temporary file, then :func:`os.replace`), so concurrent workers never see half a file.
 * The directory is ``cache_dir`` if given, else ``$CNT_ENV_CACHE_DIR``, else
-  ``$XDG_CACHE_HOME/cnt_env``, else ``~/.cache/cnt_env``.
+  the OS's user cache directory (platformdirs; ``~/.cache/cnt_env`` on Linux).
 """
 
 from __future__ import annotations
@@ -123,6 +123,17 @@ def unflatten_snapshot(arrays: dict[str, np.ndarray]) -> dict[str, Any]:
         manifest: dict[str, str] = json.loads(str(arrays[_MANIFEST][()]))
     except (KeyError, ValueError, TypeError) as exc:
         raise CacheError(f"snapshot manifest missing or unreadable: {exc}") from exc
+    try:
+        return _build(manifest, arrays)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        # a manifest that names a missing array, or a leaf under a non-dict: a damaged
+        # or foreign file, never a traceback (the caller rebuilds it)
+        raise CacheError(f"snapshot does not match its manifest: {exc!r}") from exc
+
+
+def _build(manifest: dict[str, str], arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    if not isinstance(manifest, dict):
+        raise TypeError("manifest is not a JSON object")
     root: dict[str, Any] = {}
     for path in sorted(manifest, key=lambda p: p.count(_SEP)):
         tag = manifest[path]
@@ -210,12 +221,15 @@ def load_snapshot(path: str | os.PathLike[str], key: str) -> dict[str, Any]:
 
 
 def default_cache_dir() -> Path:
-    """``$CNT_ENV_CACHE_DIR``, else ``$XDG_CACHE_HOME/cnt_env``, else ``~/.cache/cnt_env``."""
+    """``$CNT_ENV_CACHE_DIR``, else the user cache directory of the OS (platformdirs:
+    ``$XDG_CACHE_HOME/cnt_env`` or ``~/.cache/cnt_env`` on Linux, ``~/Library/Caches/cnt_env``
+    on macOS, ``%LOCALAPPDATA%\\cnt_env\\Cache`` on Windows)."""
     override = os.environ.get(CACHE_ENV_VAR)
     if override:
         return Path(override).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "cnt_env"
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("cnt_env", appauthor=False))
 
 
 @functools.cache
