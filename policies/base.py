@@ -8,12 +8,11 @@ randomness reseed; closed-loop ones clear their memory).
 
 from __future__ import annotations
 
-import math
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from cnt_env.task.env import flow_from_action
+from cnt_env.task.spaces import action_from_flow, flow_from_action
 
 __all__ = ["ConstantPolicy", "Policy", "RandomPolicy", "action_from_flow"]
 
@@ -27,23 +26,6 @@ class Policy(Protocol):
     def reset(self, seed: int | None = None) -> None: ...
 
     def act(self, obs: np.ndarray) -> np.ndarray: ...
-
-
-def action_from_flow(vbar: float, phi: float, vbar_max: float) -> np.ndarray:
-    """The action whose flow is ``(vbar, phi)``: the inverse of the env's elliptical grid
-    map (:func:`cnt_env.task.env.flow_from_action`), disk -> square (Fong 2015, eq. for the
-    "elliptical grid" inverse)."""
-    r = min(max(vbar / vbar_max, 0.0), 1.0)
-    u, w = r * math.cos(phi), r * math.sin(phi)
-    s2 = 2.0 * math.sqrt(2.0)
-    d = u * u - w * w
-
-    def half_diff(a: float, b: float) -> float:
-        return 0.5 * math.sqrt(max(a, 0.0)) - 0.5 * math.sqrt(max(b, 0.0))
-
-    x = half_diff(2.0 + d + s2 * u, 2.0 + d - s2 * u)
-    z = half_diff(2.0 - d + s2 * w, 2.0 - d - s2 * w)
-    return np.clip(np.array([x, z], dtype=np.float32), -1.0, 1.0)
 
 
 class RandomPolicy:

@@ -4,8 +4,8 @@ A constant flow lays the same trace whatever the target is (the target only plac
 scoring, and the reset draws the same random advance for the same seed when the target
 is given by name). So the search simulates each flow of the grid once per seed, against
 a target it never reaches (no early termination), and scores the recorded trace against
-every target afterwards with :func:`score_trace`: the env's agreement score Φ
-(cnt_env/env.py, "Rewards") evaluated on the final trace, cut where the target's end
+every target afterwards with :func:`cnt_env.task.scoring.score_trace`: the env's own
+score Φ (the same implementation) evaluated on the final trace, cut where the target's end
 point was first covered (the env would have terminated there). Selection uses this
 offline score on the search seeds; reported numbers come from fresh env rollouts
 (training/evaluate.py).
@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 
 from cnt_env.task import targets as targets_mod
-from cnt_env.task.env import COVERAGE_SPACING
-
-from .base import action_from_flow
+from cnt_env.task.scoring import THIN_WEIGHTS, score_trace
+from cnt_env.task.spaces import action_from_flow
 
 __all__ = ["ConstantTrace", "grid", "record_constant", "score_trace", "search"]
 
@@ -66,47 +65,11 @@ def record_constant(env, vbar: float, phi: float, seed: int, max_steps: int) -> 
     return ConstantTrace(vbar, phi, seed, trace[n0:, [0, 2]] - origin, np.array(n_after))
 
 
-def score_trace(
-    trace: np.ndarray,
-    target: np.ndarray,
-    tolerance: float,
-    weights: Sequence[float] = (0.5, 0.25, 0.25),
-    n_after_step: np.ndarray | None = None,
-) -> dict[str, float]:
-    """Φ = w_c C + w_p P + w_g G of ``trace`` (n, 2) against ``target`` (m, 2), both
-    relative to the contact point at reset (cnt_env/env.py, "Rewards"). With
-    ``n_after_step`` the trace is cut at the first step whose trace covers the end point."""
-    samples, s = targets_mod.resample(target, min(COVERAGE_SPACING, 0.5 * tolerance))
-    if n_after_step is not None and len(trace):
-        end = np.ascontiguousarray(samples[-1:])
-        for n in n_after_step:
-            hit = np.zeros(1, dtype=np.bool_)
-            targets_mod.mark_covered(end, np.ascontiguousarray(trace[:n]), tolerance, hit)
-            if hit[0]:
-                trace = trace[:n]
-                break
-    w = np.zeros(len(s))
-    w[:-1] += 0.5 * np.diff(s)
-    w[1:] += 0.5 * np.diff(s)
-    w /= w.sum()
-    pts = np.ascontiguousarray(trace, dtype=np.float64)
-    covered = np.zeros(len(samples), dtype=np.bool_)
-    targets_mod.mark_covered(samples, pts, tolerance, covered)
-    d = np.empty(len(pts))
-    targets_mod.polyline_distances(pts, np.ascontiguousarray(target), d)
-    c = float(w @ covered)
-    p = float(np.mean(d <= tolerance)) if len(pts) else 0.0
-    hit = np.flatnonzero(covered)
-    g = float(s[hit[-1]] / s[-1]) if hit.size else 0.0
-    wc, wp, wg = weights
-    return {"score": wc * c + wp * p + wg * g, "coverage": c, "precision": p, "progress": g}
-
-
 def search(
     traces: Iterable[ConstantTrace],
     target_names: Sequence[str],
     tolerance: float,
-    weights: Sequence[float] = (0.5, 0.25, 0.25),
+    weights: Sequence[float] = THIN_WEIGHTS,
 ) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Best flow per target by mean offline score over seeds.
 

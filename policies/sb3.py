@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .residual import combine, make_base_policy
+
 __all__ = ["ALGOS", "SB3Policy", "load_policy", "vecnormalize_path"]
 
 ALGOS = ("ppo", "sac")
@@ -30,7 +32,7 @@ class SB3Policy:
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
-        #: residual agents (training/common.py ResidualAction): action = base + scale * a
+        #: residual agents (policies/residual.py): action = clip(base + scale * a)
         self.base = base
         self.scale = float(scale)
 
@@ -45,9 +47,8 @@ class SB3Policy:
         action, _ = self.model.predict(o, deterministic=True)
         a = np.asarray(action, dtype=np.float32).reshape(-1)
         if self.base is not None:
-            a = np.asarray(self.base.act(obs), dtype=np.float64) + self.scale * a
-            a = np.clip(a, -1.0, 1.0)
-        return a.astype(np.float32)
+            return combine(self.base.act(obs), a, self.scale)
+        return a
 
 
 def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu") -> SB3Policy:
@@ -77,14 +78,10 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         cfg = yaml.safe_load(cfg_path.read_text()) or {}
         residual = (cfg.get("CNTDeposit-v0") or {}).get("residual")
         if residual:
-            from .scripted import ScriptedPolicy
+            from cnt_env.task import CNTDepositEnv
 
-            if residual.get("base", "scripted") != "scripted":
-                raise ValueError(f"unknown residual base in {cfg_path}: {residual['base']!r}")
-            env_kwargs = cfg["CNTDeposit-v0"].get("env_kwargs") or {}
-            k = int(env_kwargs.get("n_trace_points", 16))  # env defaults (cnt_env/env.py)
-            m = int(env_kwargs.get("n_target_points", 16))
-            vbar_max = float(env_kwargs.get("vbar_max", 0.13))
-            base = ScriptedPolicy(slice(2 * k, 2 * k + 2 * m), vbar_max)
+            env = CNTDepositEnv(**(cfg["CNTDeposit-v0"].get("env_kwargs") or {}))
+            base = make_base_policy(residual.get("base", "scripted"),
+                                    env.observation_slices["target"], env.vbar_max)  # fmt: skip
             scale = float(residual.get("scale", 0.5))
     return SB3Policy(model, vn, name=algo, base=base, scale=scale)

@@ -8,51 +8,63 @@ tangent a few L_vb ahead, and back towards the target when the trace has drifted
 
 Speed. Under a constant flow across the steps the trace is a serpentine whose amplitude
 A falls as v̄ grows (the v̄ sweep, ``benchmarks/results/sweep_vbar/sweep.csv``: A ~ 30
-L_vb at v̄ = 0.037, ~19 at 0.08). The policy estimates the local half-width of the
+L_vb at v̄ = 0.037, ~19 at 0.08; shipped as package data,
+``policies/data/amplitude_curve.json``). The policy estimates the local half-width of the
 target ahead (half the spread of the ahead points across their chord) and picks the v̄
 whose measured A is closest to it by linear interpolation of A(v̄); a straight target
-(width ~0) gets the v̄ of the smallest measured A. Without the sweep file it falls back
-to ``FALLBACK_CURVE``, the paper's baseline (A = 30 at v̄ = 0.037) and v̄_max with A = 0.
+(width ~0) gets the v̄ of the smallest measured A.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections import defaultdict
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from .base import action_from_flow
+from cnt_env.task.spaces import action_from_flow
 
-__all__ = ["FALLBACK_CURVE", "SWEEP_CSV", "ScriptedPolicy", "amplitude_curve"]
+__all__ = ["CURVE_RESOURCE", "ScriptedPolicy", "amplitude_curve", "amplitude_curve_from_csv"]
 
-SWEEP_CSV = Path(__file__).resolve().parents[1] / "benchmarks/results/sweep_vbar/sweep.csv"
-#: (vbar, amplitude) used when the sweep file is missing: the paper's baseline and the cap.
-FALLBACK_CURVE = ((0.037, 30.0), (0.13, 0.0))
+#: The packaged amplitude curve (policies/data/amplitude_curve.json, package data).
+CURVE_RESOURCE = "data/amplitude_curve.json"
 
 
-def amplitude_curve(path: str | Path = SWEEP_CSV) -> tuple[np.ndarray, np.ndarray, str]:
-    """Mean measured serpentine amplitude per v̄ from the sweep CSV, sorted by v̄:
-    ``(vbar, amplitude, source)``. Only rows measured as a periodic serpentine count."""
-    path = Path(path)
+def amplitude_curve(path: str | Path | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+    """The measured serpentine amplitude per v̄, sorted by v̄: ``(vbar, amplitude,
+    source)``. Default: the curve shipped with the package (measured by the v̄ sweep,
+    ``benchmarks/results/sweep_vbar/sweep.csv``); with ``path``, a JSON file of the same
+    format (keys ``vbar``, ``amplitude``)."""
+    if path is None:
+        text = resources.files("policies").joinpath(CURVE_RESOURCE).read_text()
+        source = f"policies/{CURVE_RESOURCE}"
+    else:
+        text, source = Path(path).read_text(), str(path)
+    data = json.loads(text)
+    v = np.asarray(data["vbar"], dtype=float)
+    order = np.argsort(v)
+    return v[order], np.asarray(data["amplitude"], dtype=float)[order], source
+
+
+def amplitude_curve_from_csv(path: str | Path) -> dict[str, list[float]]:
+    """Mean amplitude per v̄ of a ``cnt-sim sweep --param vbar`` CSV, rows measured as a
+    periodic serpentine only: the content of the packaged JSON (regenerate it with this)."""
     rows: dict[float, list[float]] = defaultdict(list)
-    if path.is_file():
-        with path.open() as fh:
-            for row in csv.DictReader(fh):
-                try:
-                    v, a = float(row["vbar"]), float(row["amplitude"])
-                except (KeyError, ValueError):
-                    continue
-                if "serpentine" in row.get("pattern", "") and "coil" not in row.get("pattern", ""):
-                    if math.isfinite(a) and not row.get("failure"):
-                        rows[v].append(a)
-    if len(rows) >= 2:
-        v = np.array(sorted(rows))
-        return v, np.array([np.mean(rows[x]) for x in v]), str(path)
-    v, a = zip(*FALLBACK_CURVE, strict=True)
-    return np.array(v), np.array(a), "fallback"
+    with Path(path).open() as fh:
+        for row in csv.DictReader(fh):
+            try:
+                v, a = float(row["vbar"]), float(row["amplitude"])
+            except (KeyError, ValueError):
+                continue
+            if "serpentine" in row.get("pattern", "") and "coil" not in row.get("pattern", ""):
+                if math.isfinite(a) and not row.get("failure"):
+                    rows[v].append(a)
+    vs = sorted(rows)
+    return {"vbar": vs, "amplitude": [float(np.mean(rows[x])) for x in vs]}
 
 
 class ScriptedPolicy:

@@ -165,11 +165,18 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(vbar=0.2), dict(vbar_max=0.0), dict(tolerance=0.0), dict(n_trace_points=0),
      dict(image_size=32), dict(families=("circle",)), dict(families=("paper_serpentine",)),
      dict(obs_mode="pixels"), dict(Hbar=-3.0), dict(coverage_weight=0.0, precision_weight=0.0,
-     progress_weight=0.0), dict(pattern_every=-1), dict(render_mode="ascii")],
+     progress_weight=0.0), dict(pattern_every=-1), dict(render_mode="ascii"),
+     dict(warmup_seed=-1), dict(warmup_seed=1.5), dict(cache_dir=123), dict(drag_law="x"),
+     dict(families="line"), dict(families=("straight", 3)), dict(physics=[1, 2]),
+     dict(sim_options={"no_such_option": 1}), dict(tolerance="wide"), dict(vbar_max=True)],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
         CNTDepositEnv(**{**SMALL, **bad})
+
+
+def test_a_bare_family_name_is_one_family() -> None:
+    assert CNTDepositEnv(**SMALL, families="straight").families == ("straight",)
 
 
 def test_control_interval_derives_substeps() -> None:

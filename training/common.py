@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from cnt_env.task import targets as targets_mod
+from policies.residual import combine, make_base_policy
 
 __all__ = [
     "CONFIG_DIR",
@@ -66,8 +67,7 @@ def make_env(env_kwargs: dict[str, Any], max_episode_steps: int, **extra) -> gym
 
 
 class ResidualAction(gym.Wrapper):
-    """Residual policy learning (Silver et al. 2018; Johannink et al. 2019): the agent's
-    action a is a correction to a base policy's, and the env receives
+    """Residual policy learning (policies/residual.py): the env receives
     clip(base(obs) + scale * a, -1, 1). The base is the scripted heuristic
     (policies/scripted.py), so a barely trained agent already acts like it.
 
@@ -76,7 +76,9 @@ class ResidualAction(gym.Wrapper):
     def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5) -> None:
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
-        self.base = make_base_policy(base, env)
+        base_env = env.unwrapped
+        self.base = make_base_policy(base, base_env.observation_slices["target"],
+                                     base_env.vbar_max)  # fmt: skip
         self._obs: np.ndarray | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -90,21 +92,6 @@ class ResidualAction(gym.Wrapper):
         obs, reward, terminated, truncated, info = self.env.step(a)
         self._obs = obs
         return obs, reward, terminated, truncated, info
-
-
-def make_base_policy(name: str, env: gym.Env):
-    """The base policy of a residual agent (only ``"scripted"`` for now)."""
-    from policies import ScriptedPolicy
-
-    if name != "scripted":
-        raise ValueError(f"unknown residual base {name!r}; only 'scripted'")
-    return ScriptedPolicy.from_env(env)
-
-
-def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.ndarray:
-    """clip(base + scale * residual, -1, 1) as float32."""
-    a = np.asarray(base_action, dtype=np.float64) + scale * np.asarray(residual, dtype=np.float64)
-    return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
 class HeldOutCycle(gym.Wrapper):
@@ -127,14 +114,3 @@ class HeldOutCycle(gym.Wrapper):
         seed = self.seed0 + (self._k // len(self.targets))
         self._k += 1
         return self.env.reset(seed=seed, options={"target": target})
-
-
-def jsonable(x: Any) -> Any:
-    """Plain Python for YAML/JSON dumps."""
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    return x

@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cnt_env.io import to_jsonable
+
 from .common import (
     CONFIG_DIR,
     ENV_ID,
@@ -39,7 +41,6 @@ from .common import (
     HeldOutCycle,
     ResidualAction,
     env_settings,
-    jsonable,
     limit_threads,
     load_config,
     make_env,
@@ -194,7 +195,7 @@ def train(
 
     _write_learning_curve(run)
     resolved = {
-        ENV_ID: jsonable(config),
+        ENV_ID: to_jsonable(config),
         "run": {
             "algo": algo,
             "seed": seed,

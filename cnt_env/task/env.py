@@ -1,9 +1,12 @@
 """``CNTDeposit-v0``: steer the gas flow so that a depositing CNT lays a target path.
 
-The env only translates (docs/architecture.md rule 3): actions to a flow, the simulator's state to
-observations, and the trace against the target to rewards. The physics lives in
-:mod:`cnt_env.sim.deposition`; the warm start in :mod:`cnt_env.sim.warmstart`; the targets in
-:mod:`cnt_env.task.targets`. See :class:`CNTDepositEnv` for the specification.
+The env only translates (docs/architecture.md rule 3): actions to a flow
+(:mod:`cnt_env.task.spaces`), the simulator's state to observations (``spaces``,
+:mod:`cnt_env.task.raster`), and the trace against the target to rewards
+(:mod:`cnt_env.task.scoring`). The physics lives in :mod:`cnt_env.sim.deposition`; the warm
+start in :mod:`cnt_env.sim.warmstart`; the targets in :mod:`cnt_env.task.targets`; the
+keyword validation in :mod:`cnt_env.task.settings`. See :class:`CNTDepositEnv` for the
+specification.
 """
 
 from __future__ import annotations
@@ -18,13 +21,23 @@ from gymnasium import spaces
 
 from cnt_env import MAX_EPISODE_STEPS
 from cnt_env.patterns import MeasureOptions, measure
-from cnt_env.presets import DEFAULT_KAPPA_C, ENV_SIM_DEFAULTS, mesh_for
-from cnt_env.sim.deposition import DepositionConfig, DepositionSim
+from cnt_env.sim.deposition import DepositionSim
+from cnt_env.sim.forces import DRAG_LAWS
 from cnt_env.sim.stepper import SimulationError
 from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_state
+from cnt_env.task import raster, settings
 from cnt_env.task import targets as targets_mod
+from cnt_env.task.scoring import COVERAGE_SPACING, ThinScore
+from cnt_env.task.spaces import (
+    LAID_RATIO_BOUND,
+    LEAN_HEIGHT_FRACTIONS,
+    LEAN_HEIGHTS,
+    POSITION_BOUND,
+    ObservationLayout,
+    flow_from_action,
+    rod_features,
+)
 from cnt_env.task.targets import Target
-from cnt_env.units import DimensionlessParams, paper_groups
 
 __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 
@@ -40,53 +53,14 @@ CONTROL_INTERVAL_HBAR = 1.5
 DEFAULT_MAX_EPISODE_STEPS = MAX_EPISODE_STEPS
 #: Most physics steps one control step may take.
 MAX_SUBSTEPS = 100_000
-#: Bound (L_vb) of every position in the vector observation; values are clipped to it.
-POSITION_BOUND = 1000.0
-#: Bound of the laid-length / target-length ratio in the observation.
-LAID_RATIO_BOUND = 100.0
-#: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
-#: near the contact, where the next trace is shaped, and fractions of Hbar.
-LEAN_HEIGHTS = (2.0, 8.0)
-LEAN_HEIGHT_FRACTIONS = (0.5, 1.0)
-#: Largest spacing (L_vb) of the target samples used for coverage.
-COVERAGE_SPACING = 0.5
 OBS_MODES = ("vector", "image")
-SUBSTRATES = ("flat", "stepped")
 # Pattern measurements kept in info["pattern"] (patterns.measure keys).
 _PATTERN_KEYS = ("pattern", "measured_length", "amplitude", "peak_to_peak", "wavelength",
                  "coil_radius", "n_uturns", "n_cycles", "n_loops", "n_self_crossings")  # fmt: skip
 _REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
 _MEASURE_OPTIONS = MeasureOptions(transient_length=0.0)
-
-
-def flow_from_action(action: np.ndarray, vbar_max: float) -> tuple[float, float]:
-    """Map a clipped action in [-1, 1]^2 to a flow ``(vbar, phi)``.
-
-    The square is mapped onto the disk of radius ``vbar_max`` by the elliptical grid
-    map u = a_x sqrt(1 - a_z^2 / 2), w = a_z sqrt(1 - a_x^2 / 2): smooth, one-to-one,
-    the edges' midpoints and the corners all land on the rim. (u, w) are the flow's x and
-    z components over ``vbar_max``.
-    """
-    ax, az = float(action[0]), float(action[1])
-    u = ax * math.sqrt(1.0 - 0.5 * az * az)
-    w = az * math.sqrt(1.0 - 0.5 * ax * ax)
-    vbar = min(vbar_max * math.hypot(u, w), vbar_max)
-    phi = math.atan2(w, u) if vbar > 0.0 else 0.0
-    return vbar, phi
-
-
-def _distances(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-    """Distance from each point (p, 2) to the polyline ``vertices`` (n, 2)."""
-    out = np.empty(len(points))
-    targets_mod.polyline_distances(np.ascontiguousarray(points), vertices, out)
-    return out
-
-
-def _covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
-    """Which samples (s, 2) lie within ``tol`` of any of ``points`` (p, 2)."""
-    hit = np.zeros(len(samples), dtype=np.bool_)
-    targets_mod.mark_covered(samples, np.ascontiguousarray(points), tol, hit)
-    return hit
+# re-exported for callers of the v0 layout
+__all__ += ["COVERAGE_SPACING", "LAID_RATIO_BOUND", "POSITION_BOUND"]
 
 
 class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -282,7 +256,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         precision_weight: float = 0.25,
         progress_weight: float = 0.25,
         failure_penalty: float = 1.0,
-        families: Sequence[str] | None = None,
+        families: Sequence[str] | str | None = None,
         obs_mode: str = "vector",
         image_size: int = 64,
         image_extent: float = 64.0,
@@ -293,107 +267,76 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
-        self.params = _physics(preset, substrate, Hbar, Ibar, kappa_c_bar, delta_bar, vbar,
-                               phi, physics)  # fmt: skip
+        s = settings
+        self.params = s.physics_params(preset, substrate, Hbar, Ibar, kappa_c_bar, delta_bar,
+                                       vbar, phi, physics)  # fmt: skip
         self.substrate = "flat" if self.params.kappa_c_bar is None else "stepped"
-        # the preset's validated start-up radius and mesh, then the env's speed settings
-        # (ENV_SIM_DEFAULTS), then the caller's options
-        mesh = mesh_for(preset)
-        cfg: dict[str, Any] = {"initial_radius": mesh["initial_radius"]}
-        if delta_bar is None and mesh["coarse_delta"] is not None:
-            cfg["coarse_delta"] = mesh["coarse_delta"]
-        if self.params.kappa_c_bar is not None:
-            cfg.update(ENV_SIM_DEFAULTS)
-        cfg.update(sim_options or {})
-        for name, value in (("dt", dt), ("coarse_delta", coarse_delta),
-                            ("initial_radius", initial_radius)):  # fmt: skip
-            if value is not None:
-                cfg[name] = value
-        self.config = DepositionConfig(params=self.params, drag_law=drag_law, **cfg)
-
-        self.vbar_max = _positive("vbar_max", vbar_max)
+        self.config = s.deposition_config(
+            preset, self.params, delta_bar, s.choice("drag_law", drag_law, tuple(DRAG_LAWS)),
+            sim_options, dt=dt, coarse_delta=coarse_delta, initial_radius=initial_radius,
+        )  # fmt: skip
+        self.vbar_max = s.positive("vbar_max", vbar_max)
         if self.params.vbar > self.vbar_max:
             raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max = {self.vbar_max}")
-        # control interval (tau) and the derived number of physics steps
-        # (docs/architecture.md rule 4)
         self.dt = self.config.time_step
-        if control_interval is None:
-            n = max(1, round(CONTROL_INTERVAL_HBAR * self.params.Hbar / self.dt))
-            control_interval = n * self.dt
-        self.control_interval = _positive("control_interval", control_interval)
-        n = round(self.control_interval / self.dt)
-        if n < 1 or abs(n * self.dt - self.control_interval) > 1e-9 * self.control_interval:
-            raise ValueError(
-                f"control_interval = {self.control_interval!r} must be a whole multiple of the "
-                f"physics dt = {self.dt!r}; e.g. {max(n, 1) * self.dt!r}"
-            )
-        if n > MAX_SUBSTEPS:
-            raise ValueError(f"control_interval needs {n} physics steps, more than {MAX_SUBSTEPS}")
-        self.n_substeps = n
-
-        self.warmup_length = float(self.params.Hbar if warmup_length is None else warmup_length)
-        _non_negative("warmup_length", self.warmup_length)
-        self.warmup_seed = int(warmup_seed)
-        self.reset_advance = _non_negative("reset_advance", reset_advance)
-        self.tolerance = _positive("tolerance", tolerance)
-        self.n_trace_points = _count("n_trace_points", n_trace_points)
-        self.n_target_points = _count("n_target_points", n_target_points)
-        self.target_spacing = _positive("target_spacing", target_spacing)
-        self.weights = np.array([_non_negative("coverage_weight", coverage_weight),
-                                 _non_negative("precision_weight", precision_weight),
-                                 _non_negative("progress_weight", progress_weight)])  # fmt: skip
+        self.control_interval, self.n_substeps = self._substeps(control_interval)
+        self.warmup_length = s.non_negative(
+            "warmup_length", self.params.Hbar if warmup_length is None else warmup_length
+        )
+        self.warmup_seed = s.seed("warmup_seed", warmup_seed)
+        self.reset_advance = s.non_negative("reset_advance", reset_advance)
+        self.tolerance = s.positive("tolerance", tolerance)
+        self.target_spacing = s.positive("target_spacing", target_spacing)
+        self.weights = np.array([s.non_negative("coverage_weight", coverage_weight),
+                                 s.non_negative("precision_weight", precision_weight),
+                                 s.non_negative("progress_weight", progress_weight)])  # fmt: skip
         if not self.weights.sum() > 0:
             raise ValueError("at least one reward weight must be > 0")
-        self.failure_penalty = _non_negative("failure_penalty", failure_penalty)
-        self.families = tuple(targets_mod.FAMILIES) if families is None else tuple(families)
-        for f in self.families:
-            if f not in targets_mod.FAMILIES:
-                raise ValueError(f"unknown training family {f!r}; choose from "
-                                 f"{sorted(targets_mod.FAMILIES)}")  # fmt: skip
-        if not self.families:
-            raise ValueError("families must name at least one family")
-        if obs_mode not in OBS_MODES:
-            raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}")
-        self.obs_mode = obs_mode
-        self.image_size = _count("image_size", image_size)
-        if self.image_size < 64:
-            raise ValueError(f"image_size must be >= 64, got {image_size}")
-        self.image_extent = _positive("image_extent", image_extent)
-        self.render_size = _count("render_size", render_size)
-        if self.render_size < 16:
-            raise ValueError(f"render_size must be >= 16, got {render_size}")
-        if isinstance(pattern_every, bool) or not isinstance(pattern_every, (int, np.integer)):
-            raise ValueError(f"pattern_every must be an int >= 0, got {pattern_every!r}")
-        if pattern_every < 0:
-            raise ValueError(f"pattern_every must be >= 0, got {pattern_every}")
-        self.pattern_every = int(pattern_every)
-        self.cache_dir = cache_dir
+        self.failure_penalty = s.non_negative("failure_penalty", failure_penalty)
+        self.families = s.families_tuple(families, targets_mod.FAMILIES)
+        self.obs_mode = s.choice("obs_mode", obs_mode, OBS_MODES)
+        self.image_size = s.count("image_size", image_size, minimum=64)
+        self.image_extent = s.positive("image_extent", image_extent)
+        self.render_size = s.count("render_size", render_size, minimum=16)
+        self.pattern_every = s.count("pattern_every", pattern_every, minimum=0)
+        self.cache_dir = s.optional_path("cache_dir", cache_dir)
         self.lean_heights = LEAN_HEIGHTS + tuple(f * self.params.Hbar
                                                  for f in LEAN_HEIGHT_FRACTIONS)  # fmt: skip
-
+        self.layout = ObservationLayout(s.count("n_trace_points", n_trace_points),
+                                        s.count("n_target_points", n_target_points),
+                                        self.lean_heights)  # fmt: skip
+        self.n_trace_points = self.layout.n_trace_points
+        self.n_target_points = self.layout.n_target_points
+        self.observation_structure: dict[str, int] = dict(self.layout.structure)
+        self.observation_slices: dict[str, slice] = dict(self.layout.slices)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        k, m = self.n_trace_points, self.n_target_points
-        self.observation_structure: dict[str, int] = {
-            "trace": 2 * k, "target": 2 * m, "flow": 2,
-            "rod": 3 + 2 * len(self.lean_heights), "progress": 4,
-        }  # fmt: skip
-        self.observation_slices: dict[str, slice] = {}
-        start = 0
-        for name, size in self.observation_structure.items():
-            self.observation_slices[name] = slice(start, start + size)
-            start += size
-        self._obs_low, self._obs_high = self._vector_bounds(start)
-        if obs_mode == "vector":
-            self.observation_space = spaces.Box(self._obs_low, self._obs_high, dtype=np.float32)
+        if self.obs_mode == "vector":
+            self.observation_space = self.layout.space()
         else:
-            s = self.image_size
-            self.observation_space = spaces.Box(0, 255, shape=(s, s, 3), dtype=np.uint8)
+            size = self.image_size
+            self.observation_space = spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8)
 
         self._sim: DepositionSim | None = None
         self._warm: dict[str, np.ndarray] | None = None
         self.warm_start_source: str | None = None
-        self._fig: Any = None
-        self._image: Any = None
+        self._window = raster.Window(self.metadata["render_fps"])
+
+    def _substeps(self, control_interval: float | None) -> tuple[float, int]:
+        """The control interval (tau) and its whole number of physics steps
+        (docs/architecture.md rule 4)."""
+        if control_interval is None:
+            n = max(1, round(CONTROL_INTERVAL_HBAR * self.params.Hbar / self.dt))
+            control_interval = n * self.dt
+        interval = settings.positive("control_interval", control_interval)
+        n = round(interval / self.dt)
+        if n < 1 or abs(n * self.dt - interval) > 1e-9 * interval:
+            raise ValueError(
+                f"control_interval = {interval!r} must be a whole multiple of the "
+                f"physics dt = {self.dt!r}; e.g. {max(n, 1) * self.dt!r}"
+            )
+        if n > MAX_SUBSTEPS:
+            raise ValueError(f"control_interval needs {n} physics steps, more than {MAX_SUBSTEPS}")
+        return interval, n
 
     # ---- read-only views for wrappers (replay, plots) ---------------------------------------
     @property
@@ -413,20 +356,6 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         """Index in ``sim.trace()`` of the first node laid in this episode."""
         return self._n0
 
-    # ---- spaces -----------------------------------------------------------------------
-    def _vector_bounds(self, size: int) -> tuple[np.ndarray, np.ndarray]:
-        low = np.full(size, -POSITION_BOUND, dtype=np.float32)
-        high = np.full(size, POSITION_BOUND, dtype=np.float32)
-        sl = self.observation_slices
-        low[sl["flow"]], high[sl["flow"]] = -1.0, 1.0
-        rod = sl["rod"]
-        low[rod.start + 1 : rod.start + 3], high[rod.start + 1 : rod.start + 3] = -1.0, 1.0
-        prog = sl["progress"]
-        low[prog] = 0.0
-        high[prog.start : prog.start + 3] = 1.0
-        high[prog.start + 3] = LAID_RATIO_BOUND
-        return low, high
-
     # ---- reset ------------------------------------------------------------------------
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -436,6 +365,11 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         target_spec = options.pop("target", None)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}; only 'target' is known")
+        rng = self.np_random
+        if target_spec is None:
+            target = targets_mod.sample(rng, self.families)
+        else:
+            target = targets_mod.resolve(target_spec, rng)
         if self._warm is None:
             snap, self.warm_start_source = warm_state(
                 self.config, self.warmup_length, self.warmup_seed, self.cache_dir
@@ -444,11 +378,6 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             self._sim = DepositionSim(self.config, seed=self.warmup_seed)
         sim = self._sim
         assert sim is not None
-        rng = self.np_random
-        if target_spec is None:
-            target = targets_mod.sample(rng, self.families)
-        else:
-            target = targets_mod.resolve(target_spec, rng)
         advance = float(rng.uniform(0.0, 1.0)) * self.reset_advance * self.control_interval
         sim.restore(unflatten_snapshot(self._warm))
         if advance > 0.0:
@@ -461,7 +390,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._begin_episode(target)
         trace = sim.trace()
         metrics = self._last_metrics = self._metrics(trace)
-        self._potentials = self._weighted(metrics)
+        self._potentials = self._score.potentials(metrics)
         obs = self._observation(trace, metrics)
         info = self._info(metrics, dict.fromkeys(_REWARD_KEYS, 0.0), 0, 0)
         info["reset_advance"] = advance
@@ -477,21 +406,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._laid0 = float(sim.deposited_length)
         self._t0 = float(sim.time)
         self.target = target
-        pts = target.points + self._origin
-        self._target_abs = pts
-        self._target_s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        self._target_abs = target.points + self._origin
+        self._score = ThinScore(self._target_abs, self.tolerance, self.weights)
+        self._target_s = targets_mod.cumulative_length(self._target_abs)
         self._target_length = float(self._target_s[-1])
-        spacing = min(COVERAGE_SPACING, 0.5 * self.tolerance)
-        self._samples, s = targets_mod.resample(pts, spacing)
-        self._sample_s = s
-        w = np.zeros(len(s))
-        w[:-1] += 0.5 * np.diff(s)
-        w[1:] += 0.5 * np.diff(s)
-        self._sample_w = w / w.sum()
-        self._cov_frozen = np.zeros(len(s), dtype=bool)
-        self._frozen_upto = self._n0
-        self._n_in_frozen = 0
-        self._dist_sum_frozen = 0.0
         self._steps = 0
         self._failure: str | None = None
 
@@ -511,8 +429,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             info = self._info(metrics, dict.fromkeys(_REWARD_KEYS, 0.0), 0, 0)
             info["failure"] = self._failure
             return self._observation(trace, metrics), 0.0, True, False, info
-        a = np.clip(a, -1.0, 1.0)
-        self._flow = flow_from_action(a, self.vbar_max)
+        self._flow = flow_from_action(np.clip(a, -1.0, 1.0), self.vbar_max)
         before = sim.stats()
         try:
             sim.set_flow(*self._flow)
@@ -523,23 +440,19 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._steps += 1
         trace = sim.trace()
         metrics = self._last_metrics = self._metrics(trace)
-        potentials = self._weighted(metrics)
+        potentials = self._score.potentials(metrics)
         obs = self._observation(trace, metrics)
         if self._failure is None and not np.all(np.isfinite(obs)):
             self._failure = "non-finite simulator state"
         if self._failure is not None:
             obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
             if obs.dtype != np.uint8:
-                obs = np.clip(obs, self._obs_low, self._obs_high).astype(np.float32)
+                obs = self.layout.clip(obs)
             potentials = self._potentials  # a failed state scores nothing new
         delta = potentials - self._potentials
         self._potentials = potentials
-        terms = {
-            "reward_coverage": float(delta[0]),
-            "reward_precision": float(delta[1]),
-            "reward_progress": float(delta[2]),
-            "reward_failure": -self.failure_penalty if self._failure is not None else 0.0,
-        }
+        terms = dict(zip(_REWARD_KEYS[:-1], (float(d) for d in delta), strict=True))
+        terms["reward_failure"] = -self.failure_penalty if self._failure is not None else 0.0
         reward = 0.0
         for key in _REWARD_KEYS:
             reward += terms[key]
@@ -561,43 +474,13 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         return obs, reward, terminated, False, info
 
-    # ---- scoring ----------------------------------------------------------------------
+    # ---- scoring (task/scoring.py) -------------------------------------------------------
     def _metrics(self, trace: np.ndarray) -> dict[str, Any]:
-        """Coverage, precision, progress and distances of the episode's trace (nodes with
-        index >= n0). Nodes that left the solve never move again, so their contribution
-        is accumulated once; the deposited nodes still in the solve (they may slide on
-        the stepped substrate) are re-measured every step."""
+        """The score's metrics of the episode's trace (nodes from ``_n0`` on); the nodes
+        that left the solve are frozen."""
         sim = self._sim
-        tol = self.tolerance
-        frozen_end = max(self._n0, min(len(trace), sim.n_trace - sim.n_deposited))
-        if frozen_end > self._frozen_upto:
-            new = trace[self._frozen_upto : frozen_end][:, [0, 2]]
-            d = _distances(new, self._target_abs)
-            self._n_in_frozen += int(np.count_nonzero(d <= tol))
-            self._dist_sum_frozen += float(d.sum())
-            self._cov_frozen |= _covered(self._samples, new, tol)
-            self._frozen_upto = frozen_end
-        tail = trace[frozen_end:][:, [0, 2]]
-        d_tail = _distances(tail, self._target_abs)
-        covered = self._cov_frozen | _covered(self._samples, tail, tol)
-        n_laid = len(trace) - self._n0
-        n_in = self._n_in_frozen + int(np.count_nonzero(d_tail <= tol))
-        hit = np.flatnonzero(covered)
-        return {
-            "coverage": float(np.dot(self._sample_w, covered)),
-            "precision": n_in / n_laid if n_laid > 0 else 0.0,
-            "progress": float(self._sample_s[hit[-1]] / self._target_length) if hit.size else 0.0,
-            "furthest": float(self._sample_s[hit[-1]]) if hit.size else 0.0,
-            "covered_end": bool(covered[-1]),
-            "mean_distance": (self._dist_sum_frozen + float(d_tail.sum())) / n_laid
-            if n_laid > 0 else 0.0,
-            "n_laid": n_laid,
-        }  # fmt: skip
-
-    def _weighted(self, metrics: dict[str, Any]) -> np.ndarray:
-        return self.weights * np.array(
-            [metrics["coverage"], metrics["precision"], metrics["progress"]]
-        )
+        n_frozen = sim.n_trace - sim.n_deposited - self._n0
+        return self._score.update(trace[self._n0 :][:, [0, 2]], n_frozen)
 
     def _info(self, metrics: dict[str, Any], terms: dict[str, float], physics_steps: int,
               newton_iterations: int) -> dict[str, Any]:  # fmt: skip
@@ -634,255 +517,48 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             return None  # too short or degenerate to measure
         return {k: m[k] for k in _PATTERN_KEYS}
 
-    # ---- observation --------------------------------------------------------------------
+    # ---- observation (task/spaces.py, task/raster.py) -------------------------------------
     def _observation(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
-        if self.obs_mode == "image":
-            return self._image_obs(trace, metrics)
         sim = self._sim
-        contact3 = trace[-1]
-        contact = contact3[[0, 2]]
-        k, m = self.n_trace_points, self.n_target_points
-        past = trace[max(0, len(trace) - 1 - k) : len(trace) - 1][:, [0, 2]] - contact
-        if len(past) == 0:
-            past = np.zeros((1, 2))
-        if len(past) < k:
-            past = np.concatenate([np.repeat(past[:1], k - len(past), axis=0), past])
+        if self.obs_mode == "image":
+            return raster.image_observation(
+                self.image_size, self.image_extent, trace[:, [0, 2]], self._n0,
+                self._target_abs, self._target_done(metrics), sim.suspended_nodes[:, [0, 2]],
+            )  # fmt: skip
+        m = self.n_target_points
         s_ahead = np.minimum(metrics["furthest"] + self.target_spacing * np.arange(1, m + 1),
                              self._target_length)  # fmt: skip
-        ahead = np.column_stack([
-            np.interp(s_ahead, self._target_s, self._target_abs[:, 0]),
-            np.interp(s_ahead, self._target_s, self._target_abs[:, 1]),
-        ]) - contact  # fmt: skip
+        ahead = np.column_stack([np.interp(s_ahead, self._target_s, self._target_abs[:, k])
+                                 for k in (0, 1)])  # fmt: skip
         vbar, phi = self._flow
         flow = np.array([vbar * math.cos(phi), vbar * math.sin(phi)]) / self.vbar_max
-        rod = self._rod_features(sim.suspended_nodes, contact3)
+        rod = rod_features(sim.suspended_nodes, trace[-1], self.lean_heights)
         laid_ratio = (float(sim.deposited_length) - self._laid0) / self._target_length
         progress = [metrics["progress"], metrics["coverage"], metrics["precision"], laid_ratio]
-        obs = np.concatenate([past.ravel(), ahead.ravel(), flow, rod, progress])
-        return np.clip(obs, self._obs_low, self._obs_high).astype(np.float32)
+        return self.layout.build(trace, ahead, flow, rod, np.array(progress))
 
-    def _rod_features(self, nodes: np.ndarray, contact3: np.ndarray) -> np.ndarray:
-        """Contact height, contact-edge direction, and the rod's horizontal offset at
-        the lean heights, relative to the contact point."""
-        out = np.zeros(3 + 2 * len(self.lean_heights))
-        if len(nodes) == 0:
-            return out
-        c = nodes[0]
-        out[0] = c[1]
-        h = np.array([c[0] - contact3[0], c[2] - contact3[2]])
-        norm = math.hypot(h[0], h[1])
-        out[1:3] = h / norm if norm > 1e-12 else (1.0, 0.0)
-        ys = nodes[:, 1]
-        for j, height in enumerate(self.lean_heights):
-            above = np.flatnonzero(ys >= height)
-            if above.size == 0:
-                p = nodes[-1]
-            elif above[0] == 0:
-                p = nodes[0]
-            else:
-                i = above[0]
-                y0, y1 = ys[i - 1], ys[i]
-                t = (height - y0) / (y1 - y0) if y1 > y0 else 1.0
-                p = nodes[i - 1] + t * (nodes[i] - nodes[i - 1])
-            out[3 + 2 * j] = p[0] - contact3[0]
-            out[4 + 2 * j] = p[2] - contact3[2]
-        return out
-
-    # ---- rasters ------------------------------------------------------------------------
-    def _image_obs(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
-        s = self.image_size
-        img = np.zeros((s, s, 3), dtype=np.uint8)
-        scale = s / self.image_extent  # pixels per L_vb
-        centre = trace[-1, [0, 2]]
-
-        def px(points: np.ndarray) -> np.ndarray:
-            return (points - centre) * scale + 0.5 * s
-
-        xz = trace[:, [0, 2]]
-        _draw(img, px(xz[: self._n0]), 128, channel=0)
-        _draw(img, px(xz[self._n0 - 1 :]), 255, channel=0)
-        covered_to = metrics["furthest"]
-        _draw(img, px(self._target_abs), 255, channel=1)
-        if covered_to > 0:
-            _draw(img, px(self._covered_part(covered_to)), 128, channel=1)
-        _draw(img, px(self._sim.suspended_nodes[:, [0, 2]]), 255, channel=2)
-        return img
-
-    def _covered_part(self, s: float) -> np.ndarray:
-        """The target from its start to arc length s."""
-        cut = int(np.searchsorted(self._target_s, s, side="right"))
-        head = [np.interp(s, self._target_s, self._target_abs[:, k]) for k in (0, 1)]
-        return np.concatenate([self._target_abs[:cut], [head]])
+    def _target_done(self, metrics: dict[str, Any]) -> np.ndarray | None:
+        """The target up to its furthest covered point (None before any)."""
+        s = metrics["furthest"]
+        return raster.path_head(self._target_abs, self._target_s, s) if s > 0 else None
 
     def render(self) -> np.ndarray | None:
-        """Top view (uint8 (H, W, 3)): target (red, dark up to the furthest covered
-        point), earlier trace (grey),
-        this episode's trace (blue), the suspended rod's projection (green), the contact
-        point (black) and the flow (arrow in the corner, length v̄ / v̄_max)."""
+        """Top view (uint8 (H, W, 3); :func:`cnt_env.task.raster.top_view`)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode=...")
             return None
         if self._sim is None:
             frame = np.full((self.render_size, self.render_size, 3), 255, dtype=np.uint8)
         else:
-            frame = self._frame()
+            frame = raster.top_view(
+                self.render_size, self._sim.trace()[:, [0, 2]], self._n0, self._target_abs,
+                self._target_done(self._last_metrics), self._sim.suspended_nodes[:, [0, 2]],
+                self._flow, self.vbar_max, 4.0 * self.tolerance,
+            )  # fmt: skip
         if self.render_mode == "rgb_array":
             return frame
-        self._show(frame)
+        self._window.show(frame)
         return None
 
-    def _frame(self) -> np.ndarray:
-        n = self.render_size
-        img = np.full((n, n, 3), 255, dtype=np.uint8)
-        trace = self._sim.trace()
-        xz = trace[:, [0, 2]]
-        rod = self._sim.suspended_nodes[:, [0, 2]]
-        recent = xz[max(0, self._n0 - 50) :]
-        box = np.concatenate([self._target_abs, recent, rod])
-        lo, hi = box.min(axis=0), box.max(axis=0)
-        centre = 0.5 * (lo + hi)
-        extent = 1.15 * max(float(np.max(hi - lo)), 4.0 * self.tolerance)
-        scale = n / extent
-
-        def px(points: np.ndarray) -> np.ndarray:
-            return (points - centre) * scale + 0.5 * n
-
-        metrics = self._last_metrics
-        _draw(img, px(self._target_abs), (240, 150, 150), width=2)
-        if metrics["furthest"] > 0:
-            _draw(img, px(self._covered_part(metrics["furthest"])), (190, 30, 30), width=2)
-        _draw(img, px(xz[: self._n0]), (170, 170, 170))
-        _draw(img, px(xz[self._n0 - 1 :]), (30, 80, 220), width=2)
-        _draw(img, px(rod), (40, 160, 40))
-        _draw(img, px(xz[-1:]), (0, 0, 0), width=3)
-        # flow arrow in the lower-left corner
-        vbar, phi = self._flow
-        base = np.array([0.1 * n, 0.1 * n])
-        tip = base + (0.08 * n * vbar / self.vbar_max) * np.array([math.cos(phi), math.sin(phi)])
-        _draw(img, np.array([base, tip]), (0, 0, 0), width=2)
-        return img
-
-    def _show(self, frame: np.ndarray) -> None:
-        import matplotlib
-        import matplotlib.pyplot as plt
-
-        if self._fig is None:
-            self._fig, ax = plt.subplots(figsize=(5, 5))
-            ax.set_axis_off()
-            self._image = ax.imshow(frame)
-        else:
-            self._image.set_data(frame)
-        backend = matplotlib.get_backend().lower()
-        try:
-            from matplotlib.backends import BackendFilter, backend_registry
-
-            interactive = backend not in backend_registry.list_builtin(
-                BackendFilter.NON_INTERACTIVE
-            )
-        except ImportError:  # older matplotlib
-            interactive = backend not in ("agg", "pdf", "ps", "svg", "cairo", "pgf", "template")
-        if interactive:
-            plt.pause(1.0 / self.metadata["render_fps"])
-        else:
-            self._fig.canvas.draw()
-
     def close(self) -> None:
-        if self._fig is not None:
-            import matplotlib.pyplot as plt
-
-            plt.close(self._fig)
-            self._fig = None
-            self._image = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_fig"] = None
-        state["_image"] = None
-        return state
-
-
-# ---- helpers ----------------------------------------------------------------------------
-
-
-def _draw(img: np.ndarray, points: np.ndarray, color: int | tuple[int, int, int],
-          width: int = 1, channel: int | None = None) -> None:  # fmt: skip
-    """Rasterise the polyline ``points`` (pixel coordinates (col, row-from-bottom)) into
-    ``img`` (rows top-down), clipped to the image, ``width`` pixels wide: every channel
-    set to ``color``, or only ``channel`` set to the value ``color``."""
-    if len(points) == 0:
-        return
-    h, w = img.shape[:2]
-    if len(points) == 1:
-        samples = points
-    else:
-        seg = np.diff(points, axis=0)
-        n_sub = np.maximum(1, np.ceil(2.0 * np.max(np.abs(seg), axis=1)).astype(np.int64))
-        n_sub = np.minimum(n_sub, 4 * (h + w))  # a segment far longer than the view
-        k = np.arange(int(n_sub.sum())) - np.repeat(np.cumsum(n_sub) - n_sub, n_sub)
-        t = k / np.repeat(n_sub, n_sub)
-        samples = np.repeat(points[:-1], n_sub, axis=0) + t[:, None] * np.repeat(seg, n_sub, 0)
-        samples = np.concatenate([samples, points[-1:]])
-    cols = np.floor(samples[:, 0]).astype(np.int64)
-    rows = h - 1 - np.floor(samples[:, 1]).astype(np.int64)
-    lo = -(width // 2)
-    for dr in range(lo, lo + width):
-        for dc in range(lo, lo + width):
-            r, c = rows + dr, cols + dc
-            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-            if channel is None:
-                img[r[ok], c[ok]] = color
-            else:
-                img[r[ok], c[ok], channel] = color
-
-
-def _physics(
-    preset: str,
-    substrate: str | None,
-    Hbar: float | None,
-    Ibar: float | None,
-    kappa_c_bar: float | None,
-    delta_bar: float | None,
-    vbar: float | None,
-    phi: float | None,
-    physics: Mapping[str, Any] | None,
-) -> DimensionlessParams:
-    """The dimensionless groups: the preset's, with the keywords on top."""
-    base = paper_groups(preset)
-    if substrate is None:
-        substrate = "flat" if base.kappa_c_bar is None else "stepped"
-    if substrate not in SUBSTRATES:
-        raise ValueError(f"substrate must be one of {SUBSTRATES}, got {substrate!r}")
-    overrides: dict[str, Any] = dict(physics or {})
-    for name, value in (("Hbar", Hbar), ("Ibar", Ibar), ("delta_bar", delta_bar),
-                        ("vbar", vbar), ("phi", phi)):  # fmt: skip
-        if value is not None:
-            overrides[name] = value
-    if substrate == "flat":
-        if kappa_c_bar is not None:
-            raise ValueError("kappa_c_bar applies to the stepped substrate; pass "
-                             "substrate='stepped' or drop kappa_c_bar")  # fmt: skip
-        overrides["kappa_c_bar"] = None
-    else:
-        default = base.kappa_c_bar if base.kappa_c_bar is not None else DEFAULT_KAPPA_C
-        overrides["kappa_c_bar"] = default if kappa_c_bar is None else kappa_c_bar
-    return paper_groups(preset, **overrides)
-
-
-def _positive(name: str, value: Any) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-    return v
-
-
-def _non_negative(name: str, value: Any) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v >= 0):
-        raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
-    return v
-
-
-def _count(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be an int >= 1, got {value!r}")
-    return int(value)
+        self._window.close()

@@ -45,12 +45,15 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from cnt_env.patterns import arc_length
+
 __all__ = [
     "CURVE_SPACING",
     "FAMILIES",
     "HELD_OUT",
     "MAX_TARGET_LENGTH",
     "Target",
+    "cumulative_length",
     "draw",
     "held_out",
     "mark_covered",
@@ -131,7 +134,7 @@ def _validated(points: ArrayLike) -> FloatArray:
     pts = pts[keep]
     if pts.shape[0] < 2:
         raise ValueError("a target polyline must have non-zero length")
-    length = float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
+    length = polyline_length(pts)
     if length > MAX_TARGET_LENGTH:
         raise ValueError(
             f"target length {length:.6g} L_vb exceeds MAX_TARGET_LENGTH = {MAX_TARGET_LENGTH:g}"
@@ -139,10 +142,15 @@ def _validated(points: ArrayLike) -> FloatArray:
     return pts
 
 
+def cumulative_length(points: ArrayLike) -> FloatArray:
+    """Arc length (L_vb) at each vertex of an (n, 2) polyline, from 0
+    (:func:`cnt_env.patterns.arc_length`)."""
+    return arc_length(points)
+
+
 def polyline_length(points: ArrayLike) -> float:
     """Arc length of an (n, 2) polyline."""
-    p = np.asarray(points, dtype=np.float64)
-    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
+    return float(cumulative_length(points)[-1])
 
 
 def resample(points: ArrayLike, spacing: float) -> tuple[FloatArray, FloatArray]:
@@ -416,7 +424,7 @@ def _spiral() -> FloatArray:
     b = 25.0 / (2 * math.pi * turns)
     phi = np.linspace(0.0, 2 * math.pi * turns, 2000)
     pts = np.column_stack([b * phi * np.cos(phi), b * phi * np.sin(phi)])
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    s = cumulative_length(pts)
     keep = np.searchsorted(s, np.arange(0.0, s[-1], CURVE_SPACING))
     return np.concatenate([pts[keep], pts[-1:]])
 

@@ -1,0 +1,168 @@
+"""The action map both ways and the layout of the vector observation of ``CNTDeposit-v0``.
+
+Action. ``Box(-1, 1, (2,))`` is mapped onto the disk of flows of speed <= v̄_max by the
+elliptical grid map (:func:`flow_from_action`); :func:`action_from_flow` is its inverse,
+for scripted policies.
+
+Observation. :class:`ObservationLayout` names the slices of the flat vector (sizes in
+``structure``), its bounds, and builds it from the simulator's arrays (the env's docstring
+has the table with units).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from gymnasium import spaces
+
+__all__ = [
+    "LAID_RATIO_BOUND",
+    "LEAN_HEIGHTS",
+    "LEAN_HEIGHT_FRACTIONS",
+    "POSITION_BOUND",
+    "ObservationLayout",
+    "action_from_flow",
+    "flow_from_action",
+    "rod_features",
+]
+
+#: Bound (L_vb) of every position in the vector observation; values are clipped to it.
+POSITION_BOUND = 1000.0
+#: Bound of the laid-length / target-length ratio in the observation.
+LAID_RATIO_BOUND = 100.0
+#: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
+#: near the contact, where the next trace is shaped, and fractions of Hbar.
+LEAN_HEIGHTS = (2.0, 8.0)
+LEAN_HEIGHT_FRACTIONS = (0.5, 1.0)
+
+
+def flow_from_action(action: np.ndarray, vbar_max: float) -> tuple[float, float]:
+    """Map a clipped action in [-1, 1]^2 to a flow ``(vbar, phi)``.
+
+    The square is mapped onto the disk of radius ``vbar_max`` by the elliptical grid
+    map u = a_x sqrt(1 - a_z^2 / 2), w = a_z sqrt(1 - a_x^2 / 2): smooth, one-to-one,
+    the edges' midpoints and the corners all land on the rim. (u, w) are the flow's x and
+    z components over ``vbar_max``.
+    """
+    ax, az = float(action[0]), float(action[1])
+    u = ax * math.sqrt(1.0 - 0.5 * az * az)
+    w = az * math.sqrt(1.0 - 0.5 * ax * ax)
+    vbar = min(vbar_max * math.hypot(u, w), vbar_max)
+    phi = math.atan2(w, u) if vbar > 0.0 else 0.0
+    return vbar, phi
+
+
+def action_from_flow(vbar: float, phi: float, vbar_max: float) -> np.ndarray:
+    """The action whose flow is ``(vbar, phi)``: the inverse of :func:`flow_from_action`,
+    disk -> square (Fong 2015, the "elliptical grid" inverse). float32 (2,) in [-1, 1]."""
+    r = min(max(vbar / vbar_max, 0.0), 1.0)
+    u, w = r * math.cos(phi), r * math.sin(phi)
+    s2 = 2.0 * math.sqrt(2.0)
+    d = u * u - w * w
+
+    def half_diff(a: float, b: float) -> float:
+        return 0.5 * math.sqrt(max(a, 0.0)) - 0.5 * math.sqrt(max(b, 0.0))
+
+    x = half_diff(2.0 + d + s2 * u, 2.0 + d - s2 * u)
+    z = half_diff(2.0 - d + s2 * w, 2.0 - d - s2 * w)
+    return np.clip(np.array([x, z], dtype=np.float32), -1.0, 1.0)
+
+
+def rod_features(nodes: np.ndarray, contact3: np.ndarray,
+                 lean_heights: tuple[float, ...]) -> np.ndarray:  # fmt: skip
+    """Contact height, contact-edge direction, and the rod's horizontal offset at the lean
+    heights, relative to the contact point. ``nodes`` (k, 3): the suspended rod's nodes
+    from the contact node up; ``contact3`` (3,): the contact point."""
+    out = np.zeros(3 + 2 * len(lean_heights))
+    if len(nodes) == 0:
+        return out
+    c = nodes[0]
+    out[0] = c[1]
+    h = np.array([c[0] - contact3[0], c[2] - contact3[2]])
+    norm = math.hypot(h[0], h[1])
+    out[1:3] = h / norm if norm > 1e-12 else (1.0, 0.0)
+    ys = nodes[:, 1]
+    for j, height in enumerate(lean_heights):
+        above = np.flatnonzero(ys >= height)
+        if above.size == 0:
+            p = nodes[-1]
+        elif above[0] == 0:
+            p = nodes[0]
+        else:
+            i = above[0]
+            y0, y1 = ys[i - 1], ys[i]
+            t = (height - y0) / (y1 - y0) if y1 > y0 else 1.0
+            p = nodes[i - 1] + t * (nodes[i] - nodes[i - 1])
+        out[3 + 2 * j] = p[0] - contact3[0]
+        out[4 + 2 * j] = p[2] - contact3[2]
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ObservationLayout:
+    """The flat vector observation: K trace points, M target points, the flow, the rod
+    features at ``lean_heights`` and four progress values."""
+
+    n_trace_points: int
+    n_target_points: int
+    lean_heights: tuple[float, ...]
+    structure: dict[str, int] = field(init=False)
+    slices: dict[str, slice] = field(init=False)
+    low: np.ndarray = field(init=False, repr=False)
+    high: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        k, m = self.n_trace_points, self.n_target_points
+        structure = {"trace": 2 * k, "target": 2 * m, "flow": 2,
+                     "rod": 3 + 2 * len(self.lean_heights), "progress": 4}  # fmt: skip
+        slices, start = {}, 0
+        for name, size in structure.items():
+            slices[name] = slice(start, start + size)
+            start += size
+        object.__setattr__(self, "structure", structure)
+        object.__setattr__(self, "slices", slices)
+        low, high = self._bounds(start)
+        object.__setattr__(self, "low", low)
+        object.__setattr__(self, "high", high)
+
+    @property
+    def size(self) -> int:
+        return sum(self.structure.values())
+
+    def _bounds(self, size: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)`` float32 of the vector observation."""
+        low = np.full(size, -POSITION_BOUND, dtype=np.float32)
+        high = np.full(size, POSITION_BOUND, dtype=np.float32)
+        sl = self.slices
+        low[sl["flow"]], high[sl["flow"]] = -1.0, 1.0
+        rod = sl["rod"]
+        low[rod.start + 1 : rod.start + 3], high[rod.start + 1 : rod.start + 3] = -1.0, 1.0
+        prog = sl["progress"]
+        low[prog] = 0.0
+        high[prog.start : prog.start + 3] = 1.0
+        high[prog.start + 3] = LAID_RATIO_BOUND
+        return low, high
+
+    def space(self) -> spaces.Box:
+        return spaces.Box(self.low, self.high, dtype=np.float32)
+
+    def build(self, trace: np.ndarray, ahead: np.ndarray, flow_xz: np.ndarray,
+              rod: np.ndarray, progress: np.ndarray) -> np.ndarray:  # fmt: skip
+        """The observation from ``trace`` (n, 3) (the last node is the contact point),
+        the M target points ``ahead`` (M, 2) absolute, the flow over v̄_max (2,), the
+        :func:`rod_features` and the four progress values; clipped to the bounds."""
+        contact = trace[-1, [0, 2]]
+        k = self.n_trace_points
+        past = trace[max(0, len(trace) - 1 - k) : len(trace) - 1][:, [0, 2]] - contact
+        if len(past) == 0:
+            past = np.zeros((1, 2))
+        if len(past) < k:
+            past = np.concatenate([np.repeat(past[:1], k - len(past), axis=0), past])
+        obs = np.concatenate([past.ravel(), (ahead - contact).ravel(), flow_xz, rod, progress])
+        return self.clip(obs)
+
+    def clip(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` clipped to the bounds, as float32."""
+        return np.clip(obs, self.low, self.high).astype(np.float32)

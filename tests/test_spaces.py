@@ -1,0 +1,47 @@
+"""The action map both ways and the vector observation layout (cnt_env/task/spaces.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cnt_env.task.spaces import ObservationLayout, action_from_flow, flow_from_action, rod_features
+
+
+@pytest.mark.parametrize("a", [(-1, -1), (1, 1), (1, 0), (0, -1), (0.3, -0.7), (0, 0)])
+def test_flow_map_stays_in_the_disk_and_inverts(a) -> None:
+    vbar, phi = flow_from_action(np.array(a, dtype=float), 0.13)
+    assert 0.0 <= vbar <= 0.13
+    back = action_from_flow(vbar, phi, 0.13)
+    assert np.allclose(back, a, atol=1e-6)
+
+
+def test_corners_and_edge_midpoints_land_on_the_rim() -> None:
+    for a in [(1, 0), (0, 1), (1, 1), (-1, 1)]:
+        assert flow_from_action(np.array(a, float), 0.1)[0] == pytest.approx(0.1)
+    assert flow_from_action(np.array([1.0, 1.0]), 1.0)[1] == pytest.approx(math.pi / 4)
+
+
+def test_layout_slices_bounds_and_build() -> None:
+    layout = ObservationLayout(4, 3, (2.0, 8.0))
+    assert layout.structure == {"trace": 8, "target": 6, "flow": 2, "rod": 7, "progress": 4}
+    assert layout.size == 27 and layout.slices["rod"] == slice(16, 23)
+    assert layout.space().shape == (27,)
+    trace = np.column_stack([np.arange(3.0), np.zeros(3), np.zeros(3)])
+    ahead = np.array([[5.0, 0.0], [6.0, 0.0], [2000.0, 0.0]])
+    obs = layout.build(trace, ahead, np.array([1.0, 0.0]), np.zeros(7), np.zeros(4))
+    assert obs.dtype == np.float32
+    # the trace is padded with its oldest point, relative to the contact point (2, 0)
+    assert obs[:8].tolist() == [-2, 0, -2, 0, -2, 0, -1, 0]
+    assert obs[8:14].tolist() == [3, 0, 4, 0, 1000, 0]  # clipped to POSITION_BOUND
+
+
+def test_rod_features_interpolate_the_lean() -> None:
+    nodes = np.array([[1.0, 0.5, 0.0], [1.0, 2.5, 0.0], [3.0, 8.5, 1.0]])
+    f = rod_features(nodes, np.zeros(3), (2.0, 20.0))
+    assert f[0] == 0.5 and f[1:3].tolist() == [1.0, 0.0]
+    assert f[3:5].tolist() == [1.0, 0.0]  # height 2 lies between nodes 0 and 1: both x=1
+    assert f[5:7].tolist() == [3.0, 1.0]  # above the rod: its top
+    assert rod_features(np.zeros((0, 3)), np.zeros(3), (2.0,)).tolist() == [0, 0, 0, 0, 0]
