@@ -11,12 +11,13 @@ VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 PYTEST := $(VPY) -m pytest
 
-.PHONY: help demo test test-all lint venv clean
+.PHONY: help demo test test-all test-ray lint venv clean
 
 help:
 	@echo "make demo      create .venv, install everything (torch 2.13.0 CPU first), run the main job"
 	@echo "make test      create .venv, install everything, run the test suite (not slow)"
 	@echo "make test-all  the test suite including slow physics validations"
+	@echo "make test-ray  install the [ray] extra and run the RLlib test (slow)"
 	@echo "make lint      ruff check + ruff format --check"
 	@echo "make venv      only create/update .venv"
 	@echo "make clean     remove .venv and caches"
@@ -48,6 +49,14 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	@$(call run_pytest,-q)
+
+RAY_STAMP := $(VENV)/.installed-ray
+$(RAY_STAMP): $(STAMP)
+	$(VPY) -m pip install -e ".[ray]"
+	touch $(RAY_STAMP)
+
+test-ray: $(RAY_STAMP)
+	@$(call run_pytest,-q -m slow tests/test_rllib.py)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
