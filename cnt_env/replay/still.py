@@ -1,0 +1,64 @@
+"""A still frame of an episode (matplotlib), e.g. for the README: the top view of
+:func:`cnt_env.plotting.draw_top_view`, as the recording's ``top`` view shows it."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from cnt_env.plotting import draw_top_view, flow_arrow_scale, lvb_in_um
+from cnt_env.replay.episode import Episode, load_episode
+
+__all__ = ["episode_view_kwargs", "render_top_view"]
+
+
+def episode_view_kwargs(episode: Episode, i: int) -> dict[str, Any]:
+    """The keywords of :func:`cnt_env.plotting.draw_top_view` for frame ``i`` of
+    ``episode`` (its trace, target, rod and flow, the arrow scale and the scale bar's
+    micrometres), without ``extent``."""
+    f = episode.frame(i)
+    meta = episode.meta
+    Hbar = (meta.get("params") or {}).get("Hbar")
+    return {
+        "trace": episode.trace[: episode.trace_len[i]],
+        "target": episode.target if len(episode.target) else None,
+        "n_start": episode.n_start,
+        "rod": f.rod,
+        "flow": f.flow,
+        "flow_scale": flow_arrow_scale(Hbar, meta.get("vbar_max")),
+        "um_per_lvb": lvb_in_um(meta.get("substrate") or "flat"),
+    }
+
+
+def render_top_view(
+    episode: Episode | str | os.PathLike[str],
+    path: str | os.PathLike[str],
+    *,
+    frame: int = -1,
+    dpi: int = 150,
+) -> Path:
+    """Save the top view of an episode's frame (default: the last) as a PNG, drawn like
+    the recording's ``top`` view (:func:`cnt_env.plotting.draw_top_view`): the target,
+    the trace before reset, the episode's trace, the suspended rod seen from above and
+    the flow, with a legend and a scale bar. x to the right, z down, as in the viewer."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    if not isinstance(episode, Episode):
+        episode = load_episode(episode)
+    i = frame % len(episode.step)
+    fig = Figure(figsize=(6, 6.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    draw_top_view(ax, z_down=True, **episode_view_kwargs(episode, i))
+    meta = episode.meta
+    ax.set_title(
+        f"{meta.get('recording_id', '')}: target {meta.get('target')}, "
+        f"step {int(episode.step[i])}, t = {float(episode.sim_time[i]):.4g} tau",
+        fontsize=9,
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    return path

@@ -1,0 +1,164 @@
+"""Episodes as video: a GIF or MP4 of an episode (the optional ``[video]`` extra).
+
+:func:`episode_frames` draws every frame of an :class:`~cnt_env.replay.episode.Episode`
+with :func:`cnt_env.plotting.draw_top_view` at ONE extent for the whole episode
+(:func:`episode_extent`; no re-zoom from frame to frame), with a legend and a scale bar
+in L_vb and micrometres. Only the moving parts (trace, rod, contact point, flow, title)
+are redrawn from frame to frame. :func:`write_video` writes those frames, or any RGB
+frames (e.g. ``env.render()`` output), to ``.gif`` (Pillow) or ``.mp4`` (ffmpeg through
+imageio-ffmpeg, whose wheel ships the binary). Install the extra with
+``pip install -e ".[video]"``; matplotlib is a core dependency.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cnt_env.plotting import _agg_figure, draw_top_view, figure_rgb, top_view_extent
+from cnt_env.replay.episode import Episode, load_episode
+from cnt_env.replay.still import episode_view_kwargs
+
+__all__ = [
+    "VIDEO_FORMATS",
+    "VIDEO_INSTALL_HINT",
+    "episode_extent",
+    "episode_frames",
+    "import_imageio",
+    "write_video",
+]
+
+VIDEO_INSTALL_HINT = 'pip install -e ".[video]"'
+VIDEO_FORMATS = (".gif", ".mp4")
+#: Frame size (width, height) in pixels: multiples of 16, as H.264 encoders like.
+DEFAULT_SIZE = (640, 640)
+# Nodes of the trace laid before reset that the extent still holds (the start-up arc
+# of a warm start can be far longer than the episode).
+_BEFORE_NODES = 50
+
+
+def import_imageio() -> Any:
+    """``imageio`` (with its v3 API loaded); an ImportError that says how to install it."""
+    try:
+        import imageio
+        import imageio.v3
+    except ImportError as exc:
+        raise ImportError(
+            f"episode videos need the optional dependencies imageio and imageio-ffmpeg: "
+            f"install them with `{VIDEO_INSTALL_HINT}` (or `pip install imageio imageio-ffmpeg`)"
+        ) from exc
+    return imageio
+
+
+def episode_extent(episode: Episode, *, margin: float = 0.08) -> tuple[float, float, float, float]:
+    """The fixed square extent ``(x0, x1, z0, z1)`` of an episode's frames: the target,
+    the episode's trace, the last few nodes laid before it and the rod of every frame."""
+    n0 = episode.n_start
+    return top_view_extent(
+        episode.target,
+        episode.trace[max(0, n0 - _BEFORE_NODES) :],
+        episode.rod_nodes,
+        margin=margin,
+    )
+
+
+def episode_frames(
+    episode: Episode | str | os.PathLike[str],
+    *,
+    extent: tuple[float, float, float, float] | None = None,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    dpi: int = 100,
+    every: int = 1,
+    z_down: bool = False,
+) -> Iterator[np.ndarray]:
+    """The frames of ``episode`` (an Episode or an episode file) as uint8 (H, W, 3)
+    arrays of ``size`` = (width, height) pixels: frame 0 (the reset), every ``every``-th
+    frame, and the last. ``extent`` (default :func:`episode_extent`) is the same for all."""
+    if not isinstance(episode, Episode):
+        episode = load_episode(episode)
+    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+        raise ValueError(f"every must be an int >= 1, got {every!r}")
+    extent = episode_extent(episode) if extent is None else tuple(extent)
+    if len(extent) != 4 or not (extent[0] < extent[1] and extent[2] < extent[3]):
+        raise ValueError(f"extent must be (x0, x1, z0, z1) with x0 < x1 and z0 < z1: {extent}")
+    last = len(episode.step) - 1
+    indices = sorted({*range(0, last + 1, every), last})
+    fig = _agg_figure(size, dpi)
+    ax = fig.add_subplot()
+    view = draw_top_view(ax, extent=extent, z_down=z_down, **episode_view_kwargs(episode, 0))
+    meta = episode.meta
+    name = f"{meta.get('recording_id') or 'episode'}: target {meta.get('target')}"
+    title = ax.set_title("", fontsize="small")
+    for i in indices:
+        kw = episode_view_kwargs(episode, i)
+        view.update(kw["trace"], kw["rod"], kw["flow"])
+        title.set_text(
+            f"{name}\nstep {int(episode.step[i])}/{last}, t = {float(episode.sim_time[i]):.4g} tau"
+        )
+        yield figure_rgb(fig)
+
+
+def write_video(
+    episode_or_frames: Episode | str | os.PathLike[str] | Iterable[np.ndarray],
+    path: str | os.PathLike[str],
+    *,
+    fps: float = 10.0,
+    extent: tuple[float, float, float, float] | None = None,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    every: int = 1,
+    loop: int = 0,
+) -> Path:
+    """Write a video of an episode to ``path`` (``.gif`` or ``.mp4``, by its suffix).
+
+    ``episode_or_frames``: an :class:`Episode`, an episode file (``.npz``), or RGB frames
+    (uint8 (H, W, 3) arrays of one size, e.g. ``env.render()`` output) written as given.
+    For an episode, ``extent`` (x0, x1, z0, z1) in L_vb fixes the view (default: the
+    whole episode, :func:`episode_extent`), ``size`` is (width, height) in pixels and
+    ``every`` keeps every n-th step. ``fps``: frames per second; ``loop``: GIF repeats
+    (0: for ever). A GIF merges identical consecutive frames. Returns the path.
+    Raises ImportError (with the install hint) without the ``[video]`` extra.
+    """
+    imageio = import_imageio()
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in VIDEO_FORMATS:
+        raise ValueError(f"{path}: write a {' or '.join(VIDEO_FORMATS)} file")
+    if not (isinstance(fps, (int, float)) and 0 < fps <= 120):
+        raise ValueError(f"fps must be in (0, 120], got {fps!r}")
+    if isinstance(episode_or_frames, (Episode, str, os.PathLike)):
+        frames: Iterable[np.ndarray] = episode_frames(
+            episode_or_frames, extent=extent, size=size, every=every
+        )
+    else:
+        frames = episode_or_frames
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n = 0
+    shape = None
+    if suffix == ".gif":
+        writer = imageio.v3.imopen(path, "w", extension=".gif")
+        write = lambda frame: writer.write(frame, duration=1000.0 / fps, loop=loop)  # noqa: E731
+    else:
+        writer = imageio.v2.get_writer(path, format="FFMPEG", fps=fps, macro_block_size=16)
+        write = writer.append_data
+    try:
+        for frame in frames:
+            frame = np.asarray(frame)
+            if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] not in (3, 4):
+                raise ValueError(
+                    f"frames must be uint8 (H, W, 3) RGB arrays, got {frame.dtype} {frame.shape}"
+                )
+            if shape is not None and frame.shape != shape:
+                raise ValueError(f"frame {n} has shape {frame.shape}, the first {shape}")
+            shape = frame.shape
+            write(np.ascontiguousarray(frame[:, :, :3]))
+            n += 1
+    finally:
+        writer.close()
+    if n == 0:
+        path.unlink(missing_ok=True)
+        raise ValueError("no frames to write")
+    return path
