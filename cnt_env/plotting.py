@@ -34,6 +34,7 @@ __all__ = [
     "LABELS",
     "PALETTE",
     "TopView",
+    "agg_figure",
     "draw_top_view",
     "figure_rgb",
     "flow_arrow_scale",
@@ -455,14 +456,14 @@ def top_view_image(
     target: Any = None,
     *,
     size: tuple[int, int] = (640, 640),
-    dpi: int = 100,
     title: str | None = None,
     **kwargs: Any,
 ) -> np.ndarray:
     """One top view as a uint8 (H, W, 3) image of ``size`` (width, height) pixels:
-    :func:`draw_top_view` with ``kwargs`` on a fresh Agg figure. Pass a fixed
-    ``extent`` for frames of one episode (e.g. an env's ``render()``)."""
-    fig = _agg_figure(size, dpi)
+    :func:`draw_top_view` with ``kwargs`` on a fresh Agg figure, laid out the same at
+    every size (:func:`agg_figure`). Pass a fixed ``extent`` for frames of one episode
+    (e.g. an env's ``render()``)."""
+    fig = agg_figure(size)
     ax = fig.add_subplot()
     draw_top_view(ax, trace, target, **kwargs)
     if title:
@@ -470,13 +471,22 @@ def top_view_image(
     return figure_rgb(fig)
 
 
-def _agg_figure(size: tuple[int, int], dpi: int) -> Any:
-    """A figure of exactly ``size`` pixels on an Agg canvas, with room for the legend."""
+#: Width (inches) of a top-view image: its dpi is width in pixels / this, so that the
+#: layout (fonts, legend, margins) is the same at every size.
+IMAGE_WIDTH_INCHES = 6.4
+
+
+def agg_figure(size: tuple[int, int]) -> Any:
+    """A figure of exactly ``size`` = (width, height) pixels on an Agg canvas, with room
+    below the axes for the legend; the same layout at every size."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    width, height = size
-    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    width, height = (int(v) for v in size)
+    if width < 16 or height < 16:
+        raise ValueError(f"size must be (width, height) of at least 16 pixels, got {size}")
+    dpi = width / IMAGE_WIDTH_INCHES
+    fig = Figure(figsize=(IMAGE_WIDTH_INCHES, height / dpi), dpi=dpi)
     FigureCanvasAgg(fig)
     fig.subplots_adjust(left=0.1, right=0.97, top=0.93, bottom=0.24)
     return fig

@@ -361,3 +361,78 @@ def test_cli_run_records_the_run(rr, tmp_path: Path) -> None:
     assert got["scalars"]["/metrics/deposited_length"][-1][1] >= 5.0
     assert got["texts"][0].startswith("start") and got["texts"][-1].startswith("end of the run")
     assert cli.main(["run", "--deposit", "5", "--rrd", str(out), "--out", str(out)]) == 2
+
+
+# ---- video (the optional [video] extra) -------------------------------------------------
+
+
+def synthetic_episode(n_steps: int = 4) -> replay.Episode:
+    """A small episode without the env: a trace that grows along +x, a rod above it."""
+    f = n_steps + 1
+    s = np.linspace(0.0, 20.0, 10 + 5 * n_steps)
+    trace = np.column_stack([s, np.zeros_like(s), np.sin(s / 3)])
+    trace_len = np.arange(f) * 5 + 10
+    rods = [np.column_stack([np.full(6, trace[k - 1, 0]), np.arange(6.0),
+                             np.full(6, trace[k - 1, 2])]) for k in trace_len]  # fmt: skip
+    return replay.Episode(
+        step=np.arange(f), sim_time=15.0 * np.arange(f), flow=np.tile([0.05, 0.3], (f, 1)),
+        reward=np.full(f, 0.1), reward_terms=np.zeros((f, 0)), reward_term_names=(),
+        metrics=np.zeros((f, 0)), metric_names=(), rod_nodes=np.concatenate(rods),
+        rod_offsets=np.arange(f + 1) * 6, trace_len=trace_len, trace=trace,
+        target=np.array([[s[9], 0.0], [30.0, 5.0]]),
+        terminated=np.zeros(f, bool), truncated=np.arange(f) == n_steps,
+        meta={"recording_id": "synthetic", "target": "line", "substrate": "stepped",
+              "params": {"Hbar": 30.0}, "vbar_max": 0.13},
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def iio():
+    pytest.importorskip(
+        "imageio_ffmpeg", reason='imageio-ffmpeg missing: pip install -e ".[video]"'
+    )
+    return pytest.importorskip("imageio.v3", reason='imageio missing: pip install -e ".[video]"')
+
+
+def test_episode_gif_reads_back(iio, tmp_path: Path) -> None:
+    ep = synthetic_episode(4)
+    path = save_episode(tmp_path / "ep.npz", ep)
+    gif = replay.write_video(path, tmp_path / "ep.gif", fps=5, size=(320, 240))
+    frames = iio.imread(gif, index=None)
+    assert frames.shape == (ep.n_steps + 1, 240, 320, 3)  # the reset frame and every step
+    assert iio.immeta(gif)["duration"] == 200  # ms per frame at 5 fps
+    # the extent is fixed: the tick labels left of the axes never change (raw frames: a
+    # GIF's palette is chosen per frame)
+    raw = list(replay.episode_frames(ep, size=(320, 240)))
+    assert len(raw) == len(frames) and raw[0].shape == frames[0].shape
+    assert np.array_equal(raw[0][:, :40], raw[-1][:, :40])
+    assert not np.array_equal(raw[0], raw[-1])  # the trace grew
+    # every other step (and the last), from an Episode
+    again = replay.write_video(ep, tmp_path / "half.gif", size=(320, 240), every=3)
+    assert iio.imread(again, index=None).shape[0] == 3  # steps 0, 3, 4
+
+
+def test_video_from_frames_and_mp4(iio, tmp_path: Path) -> None:
+    import imageio
+
+    frames = [np.full((64, 96, 3), 40 * i, dtype=np.uint8) for i in range(5)]
+    gif = replay.write_video(frames, tmp_path / "f.gif", fps=10)
+    assert iio.imread(gif, index=None).shape == (5, 64, 96, 3)
+    mp4 = replay.write_video(iter(frames), tmp_path / "f.mp4", fps=10)
+    reader = imageio.v2.get_reader(mp4)
+    assert reader.count_frames() == 5 and reader.get_meta_data()["size"] == (96, 64)
+    reader.close()
+    with pytest.raises(ValueError, match=r"\.gif or \.mp4"):
+        replay.write_video(frames, tmp_path / "f.avi")
+    with pytest.raises(ValueError, match="shape"):
+        replay.write_video([frames[0], frames[0][:32]], tmp_path / "g.gif")
+    with pytest.raises(ValueError, match="uint8"):
+        replay.write_video([frames[0].astype(float)], tmp_path / "h.gif")
+    with pytest.raises(ValueError, match="extent"):
+        replay.write_video(synthetic_episode(1), tmp_path / "e.gif", extent=(1, 0, 0, 1))
+
+
+def test_missing_imageio_says_how_to_install(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    monkeypatch.setitem(sys.modules, "imageio", None)
+    with pytest.raises(ImportError, match=r'pip install -e "\.\[video\]"'):
+        replay.write_video(synthetic_episode(1), tmp_path / "x.gif")

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from cnt_env.plotting import _agg_figure, draw_top_view, figure_rgb, top_view_extent
+from cnt_env.plotting import agg_figure, draw_top_view, figure_rgb, top_view_extent
 from cnt_env.replay.episode import Episode, load_episode
 from cnt_env.replay.still import episode_view_kwargs
 
@@ -71,7 +71,6 @@ def episode_frames(
     *,
     extent: tuple[float, float, float, float] | None = None,
     size: tuple[int, int] = DEFAULT_SIZE,
-    dpi: int = 100,
     every: int = 1,
     z_down: bool = False,
 ) -> Iterator[np.ndarray]:
@@ -87,7 +86,7 @@ def episode_frames(
         raise ValueError(f"extent must be (x0, x1, z0, z1) with x0 < x1 and z0 < z1: {extent}")
     last = len(episode.step) - 1
     indices = sorted({*range(0, last + 1, every), last})
-    fig = _agg_figure(size, dpi)
+    fig = agg_figure(size)
     ax = fig.add_subplot()
     view = draw_top_view(ax, extent=extent, z_down=z_down, **episode_view_kwargs(episode, 0))
     meta = episode.meta
