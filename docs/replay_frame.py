@@ -4,9 +4,12 @@ A small rod (Hbar 30, the test suite's configuration), a target of the ``arc``
 family, seed 1, 300 steps of a simple heuristic (flow towards the fourth target point
 ahead of the contact point). The episode is recorded with
 :class:`cnt_env.replay.RerunRecorder` (``.rrd`` and episode ``.npz`` in ``--outdir``)
-and its last frame drawn with :func:`cnt_env.replay.render_top_view`.
+and its last frame drawn with :func:`cnt_env.replay.render_top_view`; ``--gif`` (or
+``.mp4``) also writes the whole episode as a video (:func:`cnt_env.replay.write_video`,
+the ``[video]`` extra), every ``--every``-th step.
 
     python docs/replay_frame.py [--outdir runs/replay_frame] [--png docs/replay_frame.png]
+        [--gif runs/replay_frame/episode.gif] [--every 3]
     rerun runs/replay_frame/readme-s1-e0000.rrd
 """
 
@@ -19,7 +22,7 @@ import gymnasium
 import numpy as np
 
 import cnt_env  # noqa: F401  (registers CNTDeposit-v0)
-from cnt_env.replay import RerunRecorder, render_top_view
+from cnt_env.replay import RerunRecorder, render_top_view, write_video
 
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              control_interval=15.0, reset_advance=2.0, sim_options={"dt_factor": 0.05})  # fmt: skip
@@ -32,6 +35,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--target", default="arc")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--gif", default=None, help="also write the episode as a .gif or .mp4")
+    parser.add_argument("--every", type=int, default=3, help="video: every n-th step")
     args = parser.parse_args(argv)
 
     env = gymnasium.make("CNTDeposit-v0", max_episode_steps=args.steps, **SMALL)
@@ -47,6 +52,9 @@ def main(argv: list[str] | None = None) -> None:
     env.close()
     png = render_top_view(env.episode_paths[0], args.png)
     print(f"score {info['score']:.3f}; wrote {env.paths[0]}, {env.episode_paths[0]}, {png}")
+    if args.gif:
+        video = write_video(env.episode_paths[0], args.gif, fps=10, every=args.every)
+        print(f"wrote {video}")
     print(f"open the recording with: rerun {env.paths[0]}")
 
 
