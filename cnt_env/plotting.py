@@ -35,6 +35,7 @@ __all__ = [
     "PALETTE",
     "TopView",
     "agg_figure",
+    "draw_route",
     "draw_top_view",
     "figure_rgb",
     "flow_arrow_scale",
@@ -267,6 +268,60 @@ class TopView:
             self.flow.set_visible(flow is not None)
 
 
+def draw_route(
+    ax: Any,
+    target: Any,
+    *,
+    target_done: Any = None,
+    corridor: float | None = None,
+    pads: Sequence[Any] = (),
+    keepouts: Sequence[Any] = (),
+    line_width: float = 1.6,
+) -> None:
+    """Draw a target route on ``ax``: the corridor of half-width ``corridor`` (a light
+    band), keep-out polygons, pads ((2, 2) segments), the route ((T, 2) as (x, z)) and
+    its covered part ``target_done``; colours from :data:`PALETTE`, labelled for a
+    legend. The static part of :func:`draw_top_view`, for figures that draw their own
+    traces over it (e.g. several policies on one route)."""
+    target_xz = _xz(target)
+    lw = line_width
+    if corridor is not None and corridor > 0 and len(target_xz) >= 2:
+        from matplotlib.collections import PatchCollection
+
+        band = PatchCollection(
+            _corridor_patches(target_xz, float(corridor)),
+            facecolor=rgb01("corridor"),
+            edgecolor="none",
+            zorder=0.5,
+        )
+        ax.add_collection(band)
+        ax.fill([], [], color=rgb01("corridor"), label=f"{LABELS['corridor']} (w = {corridor:g})")
+    for i, poly in enumerate(keepouts):
+        xz = _xz(poly)
+        label = LABELS["keepout"] if i == 0 else None
+        ax.fill(
+            xz[:, 0], xz[:, 1], color=rgb01("keepout"), alpha=0.35, lw=0, zorder=0.6, label=label
+        )
+    for i, pad in enumerate(pads):
+        xz = _xz(pad)
+        _line(ax, "pad", xz, lw=3 * lw, zorder=0.7, label=i == 0)
+    if len(target_xz):
+        _line(ax, "target", target_xz, lw=1.3 * lw, zorder=1)
+    done = _xz(target_done)
+    if len(done):
+        _line(ax, "target_done", done, lw=1.3 * lw, zorder=1.1)
+
+
+def _line(ax: Any, name: str, xz: Any = None, *, style: str = "-", label: bool = True,
+          **kwargs: Any) -> Any:  # fmt: skip
+    """One ``ax.plot`` of the (n, 2) points ``xz`` (none: empty, to be filled by
+    :meth:`TopView.update`) in ``PALETTE[name]``, labelled ``LABELS[name]`` if ``label``."""
+    pts = np.zeros((0, 2)) if xz is None else xz
+    (line,) = ax.plot(pts[:, 0], pts[:, 1], style, color=rgb01(name),
+                      label=LABELS[name] if label else None, **kwargs)  # fmt: skip
+    return line
+
+
 def draw_top_view(
     ax: Any,
     trace: Any,
@@ -310,100 +365,23 @@ def draw_top_view(
     Colours from :data:`PALETTE`, labels from :data:`LABELS`. Returns the
     :class:`TopView`, whose :meth:`TopView.update` redraws the moving parts.
     """
-    target_xz = _xz(target)
     lw = line_width
-    if corridor is not None and corridor > 0 and len(target_xz) >= 2:
-        from matplotlib.collections import PatchCollection
-
-        band = PatchCollection(
-            _corridor_patches(target_xz, float(corridor)),
-            facecolor=rgb01("corridor"),
-            edgecolor="none",
-            zorder=0.5,
-        )
-        ax.add_collection(band)
-        ax.fill([], [], color=rgb01("corridor"), label=f"{LABELS['corridor']} (w = {corridor:g})")
-    for i, poly in enumerate(keepouts):
-        xz = _xz(poly)
-        label = LABELS["keepout"] if i == 0 else None
-        ax.fill(
-            xz[:, 0], xz[:, 1], color=rgb01("keepout"), alpha=0.35, lw=0, zorder=0.6, label=label
-        )
-    for i, pad in enumerate(pads):
-        xz = _xz(pad)
-        label = LABELS["pad"] if i == 0 else None
-        ax.plot(xz[:, 0], xz[:, 1], "-", color=rgb01("pad"), lw=3 * lw, zorder=0.7, label=label)
-    if len(target_xz):
-        ax.plot(
-            target_xz[:, 0],
-            target_xz[:, 1],
-            "-",
-            color=rgb01("target"),
-            lw=1.3 * lw,
-            zorder=1,
-            label=LABELS["target"],
-        )
-    done = _xz(target_done)
-    if len(done):
-        ax.plot(
-            done[:, 0],
-            done[:, 1],
-            "-",
-            color=rgb01("target_done"),
-            lw=1.3 * lw,
-            zorder=1.1,
-            label=LABELS["target_done"],
-        )
-    (before,) = ax.plot(
-        [],
-        [],
-        "-",
-        color=rgb01("trace_before"),
-        lw=0.8 * lw,
-        zorder=2,
-        label=LABELS["trace_before"] if n_start > 1 else None,
-    )
-    (mine,) = ax.plot([], [], "-", color=rgb01("trace"), lw=lw, zorder=3, label=LABELS["trace"])
-    (rod_line,) = ax.plot(
-        [],
-        [],
-        "-",
-        color=rgb01("rod"),
-        lw=0.8 * lw,
-        zorder=4,
-        label=LABELS["rod"] if rod is not None else None,
-    )
-    (contact,) = ax.plot(
-        [], [], "o", color=rgb01("contact"), ms=3.5, zorder=5, label=LABELS["contact"]
-    )
-    arrow = ax.quiver(
-        [0.0],
-        [0.0],
-        [0.0],
-        [0.0],
-        angles="xy",
-        scale_units="xy",
-        scale=1.0,
-        color=rgb01("flow"),
-        width=0.006,
-        zorder=6,
-    )
+    draw_route(ax, target, target_done=target_done, corridor=corridor, pads=pads,
+               keepouts=keepouts, line_width=lw)  # fmt: skip
+    before = _line(ax, "trace_before", lw=0.8 * lw, zorder=2, label=n_start > 1)
+    mine = _line(ax, "trace", lw=lw, zorder=3)
+    rod_line = _line(ax, "rod", lw=0.8 * lw, zorder=4, label=rod is not None)
+    contact = _line(ax, "contact", style="o", ms=3.5, zorder=5)
+    arrow = ax.quiver([0.0], [0.0], [0.0], [0.0], angles="xy", scale_units="xy", scale=1.0,
+                      color=rgb01("flow"), width=0.006, zorder=6)  # fmt: skip
     view = TopView(ax, int(n_start), float(flow_scale), mine, before, rod_line, contact, arrow)
     view.update(trace, rod, flow)
     if flow is not None:
         from matplotlib.lines import Line2D
 
-        ax.add_line(
-            Line2D(
-                [],
-                [],
-                color=rgb01("flow"),
-                marker=r"$\rightarrow$",
-                ms=10,
-                lw=0,
-                label=LABELS["flow"],
-            )
-        )
+        proxy = Line2D([], [], color=rgb01("flow"), marker=r"$\rightarrow$", ms=10, lw=0)
+        proxy.set_label(LABELS["flow"])
+        ax.add_line(proxy)
     ax.set_aspect("equal", adjustable="box" if extent is not None else "datalim")
     if extent is not None:
         x0, x1, z0, z1 = extent
@@ -430,17 +408,8 @@ def _scale_bar(ax: Any, um_per_lvb: float | None) -> None:
     label = f"{length:g} L_vb"
     if um_per_lvb is not None and um_per_lvb > 0:
         label += f" = {length * um_per_lvb:.3g} µm"
-    bar = AnchoredSizeBar(
-        ax.transData,
-        length,
-        label,
-        loc="lower right",
-        pad=0.4,
-        sep=3,
-        frameon=True,
-        size_vertical=0,
-        fontproperties={"size": "small"},
-    )
+    bar = AnchoredSizeBar(ax.transData, length, label, loc="lower right", pad=0.4, sep=3,
+                          frameon=True, fontproperties={"size": "small"})  # fmt: skip
     bar.patch.set_alpha(0.8)
     ax.add_artist(bar)
 

@@ -146,3 +146,17 @@ def test_plot_run_uses_the_palette(tmp_path, monkeypatch: pytest.MonkeyPatch) ->
     top = made[0].axes[0]
     colours = {line.get_label(): to_rgb(line.get_color()) for line in top.get_lines()}
     assert colours["trace"] == pytest.approx(plotting.rgb01("trace"))
+
+
+def test_draw_route_alone() -> None:
+    """The route without a trace, for figures that draw their own traces over it."""
+    fig, ax = agg_axes()
+    target = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 15.0]])
+    plotting.draw_route(ax, target, target_done=target[:2], corridor=3.0,
+                        pads=[np.array([[20.0, 10.0], [24.0, 10.0]])])  # fmt: skip
+    labels = {line.get_label(): line for line in ax.get_lines()}
+    assert np.array_equal(labels[LABELS["target"]].get_xydata(), target)
+    assert labels[LABELS["target"]].get_color() == plotting.rgb01("target")
+    assert LABELS["target_done"] in labels and LABELS["pad"] in labels
+    assert len(ax.collections) == 1  # the corridor band
+    fig.canvas.draw()
