@@ -36,12 +36,11 @@ SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              sim_options={"dt_factor": 0.05})  # fmt: skip
 N_STEPS = 6  # the time limit of the recorded episodes
 SEED = 7
-# Entities every recorded episode holds.
+# Entities every recorded episode holds (and one "/reward/<term>" per info["reward_<term>"]:
+# reward_entities).
 EPISODE_ENTITIES = {
     "/world/rod", "/world/trace", "/world/flow", "/top/rod", "/top/trace", "/top/flow",
-    "/reward/total", "/reward/return", "/reward/coverage", "/reward/precision",
-    "/reward/progress", "/reward/failure", "/score/score", "/score/coverage",
-    "/score/precision", "/score/progress", "/flow/vbar", "/flow/phi", "/events",
+    "/reward/total", "/reward/return", "/score/score", "/flow/vbar", "/flow/phi", "/events",
 }  # fmt: skip
 STATIC_ENTITIES = {"/world", "/world/substrate", "/world/target", "/top/target",
                    "/world/trace_before", "/top/trace_before"}  # fmt: skip
@@ -77,6 +76,15 @@ def run_episode(env: gymnasium.Env, seed: int | None = SEED) -> tuple[list[float
         if terminated or truncated:
             break
     return rewards, infos
+
+
+def reward_terms(info: dict) -> list[str]:
+    """The reward terms of a step's ``info`` (``reward_<term>`` keys), in order."""
+    return [k for k in info if k.startswith("reward_")]
+
+
+def reward_entities(info: dict) -> set[str]:
+    return {"/reward/" + k.removeprefix("reward_") for k in reward_terms(info)}
 
 
 def rrd_content(path: Path) -> dict[str, list]:
@@ -140,8 +148,9 @@ def test_episode_file_round_trip(kw: dict, tmp_path: Path) -> None:
     assert ep.n_steps == n and list(ep.step) == list(range(n + 1))
     assert ep.reward[1:].tolist() == rewards
     assert ep.sim_time[1:].tolist() == [i["sim_time"] for i in infos]
-    k = ep.reward_term_names.index("reward_coverage")
-    assert ep.reward_terms[1:, k].tolist() == [i["reward_coverage"] for i in infos]
+    assert list(ep.reward_term_names) == reward_terms(infos[0])
+    for k, term in enumerate(ep.reward_term_names):
+        assert ep.reward_terms[1:, k].tolist() == [i[term] for i in infos]
     assert ep.metrics[-1, ep.metric_names.index("score")] == infos[-1]["score"]
     assert ep.truncated[-1] and not ep.truncated[:-1].any() and ep.failure == ""
     sim = replay._simulator(env)  # the env's DepositionSim
@@ -210,17 +219,17 @@ def test_recorded_episode_reads_back(rr, kw: dict, tmp_path: Path) -> None:
     got = replay.read_rrd(path)
     assert got["blueprints"] == 1
     assert got["timelines"] == ["sim_time", "step"]  # no log_time: reproducible files
-    assert EPISODE_ENTITIES <= set(got["rows"])
+    assert EPISODE_ENTITIES | reward_entities(infos[0]) <= set(got["rows"])
     assert STATIC_ENTITIES <= set(got["static"])
     for entity in ("/world/rod", "/world/trace", "/top/rod", "/world/flow", "/score/score",
                    "/flow/vbar"):  # fmt: skip
         assert got["rows"][entity] == n + 1, entity  # the reset frame and every step
-    for entity in ("/reward/total", "/reward/coverage", "/reward/return"):
+    for entity in {"/reward/total", "/reward/return"} | reward_entities(infos[0]):
         assert got["rows"][entity] == n, entity
     assert got["scalars"]["/reward/total"] == list(enumerate(rewards, start=1))
-    assert got["scalars"]["/reward/precision"] == [
-        (i, info["reward_precision"]) for i, info in enumerate(infos, start=1)
-    ]
+    for term in reward_terms(infos[0]):
+        entity = "/reward/" + term.removeprefix("reward_")
+        assert got["scalars"][entity] == [(i, info[term]) for i, info in enumerate(infos, 1)]
     assert got["scalars"]["/score/score"][-1] == (n, infos[-1]["score"])
     assert got["scalars"]["/flow/phi"][1:] == [
         (i, info["flow_phi"]) for i, info in enumerate(infos, start=1)

@@ -140,12 +140,9 @@ class RerunRecorder(EpisodeWrapper):
             self.rr, self._rec, flow_scale=flow_arrow_scale(Hbar, meta.get("vbar_max"))
         )
         trace = _simulator(self.env).trace()
-        target = self._buffer.target
+        # the substrate outline waits for the episode's end, as in write_episode
         self._logger.static_scene(
-            target=target,
-            trace_before=trace,
-            extent_points=[target, trace[:, [0, 2]]],
-            substrate=meta.get("substrate"),
+            target=self._buffer.target, trace_before=trace, extent_points=None, substrate=None
         )
         self._logger.frame(frame)
 
@@ -157,8 +154,11 @@ class RerunRecorder(EpisodeWrapper):
         cut = f"episode cut short after {len(buffer) - 1} steps (reset or close)"
         episode = buffer.episode(self.env) if self.save_episodes or not self.stream else None
         if self._rec is not None:  # streamed
-            if interrupted and self._logger is not None:
+            assert self._logger is not None
+            if interrupted:
                 self._logger.rec.log("events", self.rr.TextLog(cut, level="WARN"))
+            before = buffer.final_trace(self.env)[: buffer.n_start]
+            self._logger.substrate_outline([buffer.target, before], buffer.meta.get("substrate"))
             close_stream(self._rec)
             self._rec = None
             self._logger = None

@@ -182,32 +182,15 @@ class SceneLogger:
         *,
         target: np.ndarray | None,
         trace_before: np.ndarray | None,
-        extent_points: Sequence[np.ndarray],
+        extent_points: Sequence[np.ndarray] | None,
         substrate: str | None,
     ) -> None:
+        """The view coordinates, the target, the trace laid before, and (unless
+        ``extent_points`` is None) the substrate outline (:meth:`substrate_outline`)."""
         rr, rec = self.rr, self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
-        pts = [
-            np.asarray(p)[:, :2] if np.shape(p)[-1] == 2 else np.asarray(p)[:, [0, 2]]
-            for p in extent_points
-            if len(p)
-        ]
-        if pts:
-            xz = np.concatenate(pts)
-            m = SUBSTRATE_MARGIN
-            lo = np.floor((xz.min(axis=0) - m) / m) * m
-            hi = np.ceil((xz.max(axis=0) + m) / m) * m
-            box = np.array(
-                [[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]], [lo[0], lo[1]]]
-            )
-            label = f"{substrate or 'flat'} substrate"
-            rec.log(
-                "world/substrate",
-                rr.LineStrips3D(
-                    [_lift(box)], colors=PALETTE["substrate"], radii=self._radius, labels=label
-                ),
-                static=True,
-            )
+        if extent_points is not None:
+            self.substrate_outline(extent_points, substrate)
         if target is not None and len(target) >= 2:
             rec.log(
                 "world/target",
@@ -237,6 +220,30 @@ class SceneLogger:
                 ),
                 static=True,
             )
+
+    def substrate_outline(self, extent_points: Sequence[np.ndarray], substrate: str | None) -> None:
+        """The substrate's outline (static): the box around ``extent_points`` ((n, 2) as
+        (x, z) or (n, 3)) with a margin, its corners rounded outwards to multiples of
+        ``SUBSTRATE_MARGIN``. Log it from final data (laid nodes still in the solve
+        slide a little), so that a streamed and a collected recording agree."""
+        rr = self.rr
+        pts = [
+            np.asarray(p)[:, :2] if np.shape(p)[-1] == 2 else np.asarray(p)[:, [0, 2]]
+            for p in extent_points
+            if len(p)
+        ]
+        if not pts:
+            return
+        xz = np.concatenate(pts)
+        m = SUBSTRATE_MARGIN
+        lo = np.floor((xz.min(axis=0) - m) / m) * m
+        hi = np.ceil((xz.max(axis=0) + m) / m) * m
+        box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]], lo])
+        label = f"{substrate or 'flat'} substrate"
+        strips = rr.LineStrips3D(
+            [_lift(box)], colors=PALETTE["substrate"], radii=self._radius, labels=label
+        )
+        self.rec.log("world/substrate", strips, static=True)
 
     def frame(self, f: Frame) -> None:
         rr, rec = self.rr, self.rec

@@ -72,6 +72,15 @@ class EpisodeBuffer:
         return len(self._rows)
 
     @property
+    def n_start(self) -> int:
+        """Trace nodes laid before the episode (0 before start)."""
+        return self._n0
+
+    def final_trace(self, env: gym.Env) -> np.ndarray:
+        """The trace at the episode's end, else ``env``'s current one."""
+        return _simulator(env).trace() if self._final_trace is None else self._final_trace
+
+    @property
     def target(self) -> np.ndarray:
         """The target polyline, absolute (x, z), (T, 2); (0, 2) before start."""
         return self._target
@@ -177,11 +186,9 @@ class EpisodeBuffer:
         ``env``'s current one."""
         if not self._rows:
             raise RuntimeError("EpisodeBuffer.episode before start")
-        trace = self._final_trace
-        if trace is None:
-            if env is None:
-                raise RuntimeError("the episode has not ended: pass the env")
-            trace = _simulator(env).trace()
+        if self._final_trace is None and env is None:
+            raise RuntimeError("the episode has not ended: pass the env")
+        trace = self._final_trace if env is None else self.final_trace(env)
         rows = self._rows
         term_names = _union(r["terms"] for r in rows)
         metric_names = _union(r["metrics"] for r in rows)
