@@ -295,7 +295,7 @@ def draw_route(
             zorder=0.5,
         )
         ax.add_collection(band)
-        ax.fill([], [], color=rgb01("corridor"), label=f"{LABELS['corridor']} (w = {corridor:g})")
+        ax.fill([], [], color=rgb01("corridor"), label=f"{LABELS['corridor']} (w = {corridor:.3g})")
     for i, poly in enumerate(keepouts):
         xz = _xz(poly)
         label = LABELS["keepout"] if i == 0 else None

@@ -375,7 +375,7 @@ def test_cli_run_records_the_run(rr, tmp_path: Path) -> None:
 # ---- video (the optional [video] extra) -------------------------------------------------
 
 
-def synthetic_episode(n_steps: int = 4) -> replay.Episode:
+def synthetic_episode(n_steps: int = 4, meta: dict | None = None) -> replay.Episode:
     """A small episode without the env: a trace that grows along +x, a rod above it."""
     f = n_steps + 1
     s = np.linspace(0.0, 20.0, 10 + 5 * n_steps)
@@ -391,8 +391,31 @@ def synthetic_episode(n_steps: int = 4) -> replay.Episode:
         target=np.array([[s[9], 0.0], [30.0, 5.0]]),
         terminated=np.zeros(f, bool), truncated=np.arange(f) == n_steps,
         meta={"recording_id": "synthetic", "target": "line", "substrate": "stepped",
-              "params": {"Hbar": 30.0}, "vbar_max": 0.13},
+              "params": {"Hbar": 30.0}, "vbar_max": 0.13, **(meta or {})},
     )  # fmt: skip
+
+
+ROUTE = {"width": 4.0, "pads": [[[25.0, 0.0], [25.0, 8.0]]],
+         "keepouts": [[[5.0, 8.0], [15.0, 8.0], [15.0, 14.0]]]}  # fmt: skip
+
+
+def test_route_is_drawn_in_the_still_and_the_recording(rr, tmp_path: Path) -> None:
+    ep = synthetic_episode(3, meta={"route": ROUTE})
+    geometry = replay.episode.route_geometry(ep.meta)
+    assert geometry["width"] == 4.0 and geometry["pads"][0].shape == (2, 2)
+    kw = replay.still.episode_view_kwargs(ep, 3)
+    assert kw["corridor"] == 4.0 and len(kw["pads"]) == len(kw["keepouts"]) == 1
+    _, _, z0, z1 = replay.video.episode_extent(ep)
+    assert z1 > 14.0 and z0 < -4.0  # the keep-out and the corridor are in view
+    assert replay.render_top_view(ep, tmp_path / "still.png").exists()
+    replay.record_episode(ep, tmp_path / "route.rrd")
+    static = set(replay.read_rrd(tmp_path / "route.rrd")["static"])
+    assert {"/top/corridor", "/top/pads", "/top/keepouts", "/world/pads"} <= static
+    # a malformed route only loses the drawing
+    assert replay.episode.route_geometry({"route": {"width": -1}}) is None
+    assert replay.episode.route_geometry({"route": {"width": 2, "keepouts": [[[0, 0]]]}}) is None
+    replay.record_episode(synthetic_episode(1), tmp_path / "plain.rrd")
+    assert "/top/corridor" not in replay.read_rrd(tmp_path / "plain.rrd")["static"]
 
 
 @pytest.fixture(scope="module")

@@ -53,7 +53,10 @@ entity                  archetype               content
 ``world/trace``         LineStrips3D            trace laid since reset (runs: all)
 ``world/rod``           LineStrips3D            the suspended rod, contact to top
 ``world/flow``          Arrows3D                flow velocity at the contact point
+``world/pads``          LineStrips3D            a route's pads (static)
+``world/keepouts``      LineStrips3D            a route's keep-out polygons (static)
 ``top/...``             LineStrips2D, Arrows2D  the same seen from above: (x, z)
+``top/corridor``        LineStrips2D            a route's corridor: half-width w (static)
 ``reward/total``        Scalars                 the reward ``step`` returned
 ``reward/<term>``       Scalars                 ``info["reward_<term>"]``
 ``reward/return``       Scalars                 the return so far

@@ -37,6 +37,7 @@ __all__ = [
     "Frame",
     "file_format",
     "load_episode",
+    "route_geometry",
     "save_episode",
     "series_path",
     "split_info",
@@ -443,6 +444,28 @@ def load_episode(path: str | os.PathLike[str]) -> Episode:
         return Episode(**fields_, failure=failure, meta=meta)
     except ValueError as exc:
         raise EpisodeFileError(f"{path} is a damaged episode file: {exc}") from exc
+
+
+def route_geometry(meta: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The route drawn around the target, from an episode's ``meta["route"]`` (written by
+    the wrappers when the env's target is a route with a corridor): ``width`` (the
+    corridor's half-width w, L_vb), ``pads`` (a list of (2, 2) segments) and ``keepouts``
+    (a list of (k, 2) polygons), absolute (x, z). None when the episode has none or it
+    is malformed (an episode stays readable; only the drawing goes)."""
+    route = meta.get("route")
+    if not isinstance(route, Mapping):
+        return None
+    try:
+        width = float(route["width"])
+        pads = [np.asarray(p, dtype=np.float64).reshape(2, 2) for p in route.get("pads") or ()]
+        keepouts = [np.asarray(k, dtype=np.float64) for k in route.get("keepouts") or ()]
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (math.isfinite(width) and width > 0) or any(
+        k.ndim != 2 or k.shape[1] != 2 or len(k) < 3 for k in keepouts
+    ):
+        return None
+    return {"width": width, "pads": pads, "keepouts": keepouts}
 
 
 # ---- events and frames, shared by the episode and the live wrappers --------------------

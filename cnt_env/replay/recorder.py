@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 
 from cnt_env.plotting import flow_arrow_scale
-from cnt_env.replay.episode import Episode, Frame, load_episode, save_episode
+from cnt_env.replay.episode import Episode, Frame, load_episode, route_geometry, save_episode
 from cnt_env.replay.rerun import (
     MODES,
     SceneLogger,
@@ -144,6 +144,7 @@ class RerunRecorder(EpisodeWrapper):
         self._logger.static_scene(
             target=self._buffer.target, trace_before=trace, extent_points=None, substrate=None
         )
+        self._logger.route(self._buffer.target, route_geometry(meta))
         self._logger.frame(frame)
 
     def _on_frame(self, frame: Frame) -> None:
@@ -224,6 +225,7 @@ def write_episode(
             extent_points=[episode.target, before[:, [0, 2]]],
             substrate=meta.get("substrate"),
         )
+        logger.route(episode.target, route_geometry(meta))
         last = len(episode.step) - 1
         frames = [episode.frame(i) for i in range(last + 1)]
         for i, f in enumerate(frames):

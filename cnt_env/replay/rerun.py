@@ -221,6 +221,28 @@ class SceneLogger:
                 static=True,
             )
 
+    def route(self, target: np.ndarray, route: Mapping[str, Any] | None) -> None:
+        """The route around ``target`` (static, :func:`~cnt_env.replay.episode.route_geometry`):
+        the corridor as a band of half-width w in the top view, the pads and the keep-outs
+        (closed) in both views."""
+        if route is None or len(target) < 2:
+            return
+        rr, rec, radius = self.rr, self.rec, self._radius
+        band = rr.LineStrips2D([target], colors=PALETTE["corridor"], radii=route["width"],
+                               draw_order=-1.0)  # fmt: skip
+        rec.log("top/corridor", band, static=True)
+        for name, strips in (
+            ("pads", list(route["pads"])),
+            ("keepouts", [np.concatenate([k, k[:1]]) for k in route["keepouts"]]),
+        ):
+            if not strips:
+                continue
+            color = PALETTE["pad" if name == "pads" else "keepout"]
+            rec.log(f"world/{name}", rr.LineStrips3D([_lift(x) for x in strips], colors=color,
+                                                     radii=radius), static=True)  # fmt: skip
+            rec.log(f"top/{name}", rr.LineStrips2D(strips, colors=color, radii=radius,
+                                                   draw_order=0.5), static=True)  # fmt: skip
+
     def substrate_outline(self, extent_points: Sequence[np.ndarray], substrate: str | None) -> None:
         """The substrate's outline (static): the box around ``extent_points`` ((n, 2) as
         (x, z) or (n, 3)) with a margin, its corners rounded outwards to multiples of

@@ -8,19 +8,23 @@ from pathlib import Path
 from typing import Any
 
 from cnt_env.plotting import draw_top_view, flow_arrow_scale, lvb_in_um
-from cnt_env.replay.episode import Episode, load_episode
+from cnt_env.replay.episode import Episode, load_episode, route_geometry
 
 __all__ = ["episode_view_kwargs", "render_top_view"]
 
 
 def episode_view_kwargs(episode: Episode, i: int) -> dict[str, Any]:
     """The keywords of :func:`cnt_env.plotting.draw_top_view` for frame ``i`` of
-    ``episode`` (its trace, target, rod and flow, the arrow scale and the scale bar's
-    micrometres), without ``extent``."""
+    ``episode`` (its trace, target and route, rod and flow, the arrow scale and the
+    scale bar's micrometres), without ``extent``."""
     f = episode.frame(i)
     meta = episode.meta
     Hbar = (meta.get("params") or {}).get("Hbar")
+    route = route_geometry(meta) or {}
     return {
+        "corridor": route.get("width"),
+        "pads": route.get("pads", ()),
+        "keepouts": route.get("keepouts", ()),
         "trace": episode.trace[: episode.trace_len[i]],
         "target": episode.target if len(episode.target) else None,
         "n_start": episode.n_start,

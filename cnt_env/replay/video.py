@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from cnt_env.plotting import agg_figure, draw_top_view, figure_rgb, top_view_extent
-from cnt_env.replay.episode import Episode, load_episode
+from cnt_env.replay.episode import Episode, load_episode, route_geometry
 from cnt_env.replay.still import episode_view_kwargs
 
 __all__ = [
@@ -55,15 +55,17 @@ def import_imageio() -> Any:
 
 
 def episode_extent(episode: Episode, *, margin: float = 0.08) -> tuple[float, float, float, float]:
-    """The fixed square extent ``(x0, x1, z0, z1)`` of an episode's frames: the target,
-    the episode's trace, the last few nodes laid before it and the rod of every frame."""
+    """The fixed square extent ``(x0, x1, z0, z1)`` of an episode's frames: the target
+    and its route (corridor, pads, keep-outs), the episode's trace, the last few nodes
+    laid before it and the rod of every frame."""
     n0 = episode.n_start
-    return top_view_extent(
-        episode.target,
-        episode.trace[max(0, n0 - _BEFORE_NODES) :],
-        episode.rod_nodes,
-        margin=margin,
-    )
+    sets: list[Any] = [episode.target, episode.trace[max(0, n0 - _BEFORE_NODES) :]]
+    route = route_geometry(episode.meta)
+    if route is not None and len(episode.target):
+        w = route["width"]
+        sets += [episode.target + d for d in ((w, w), (-w, -w))]
+        sets += [*route["pads"], *route["keepouts"]]
+    return top_view_extent(*sets, episode.rod_nodes, margin=margin)
 
 
 def episode_frames(

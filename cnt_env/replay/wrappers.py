@@ -244,6 +244,24 @@ def _env_meta(env: gym.Env) -> dict[str, Any]:
         "control_interval": getattr(u, "control_interval", None),
         "target": getattr(target, "name", None),
         "target_params": dict(getattr(target, "params", {}) or {}),
+        "route": _route_meta(target, getattr(u, "target_path", None)),
+    }
+
+
+def _route_meta(target: Any, path: Any) -> dict[str, Any] | None:
+    """The corridor half-width, pads and keep-outs of a route target, absolute (x, z)
+    (the route starts at ``path[0]``, the contact point at reset); None for a target
+    without a corridor."""
+    width = getattr(target, "width", None)
+    if width is None or path is None or len(path) == 0:
+        return None
+    origin = np.asarray(path, dtype=np.float64)[0]
+    pads = np.asarray(getattr(target, "pads", ()), dtype=np.float64).reshape(-1, 2, 2)
+    keepouts = [np.asarray(k, dtype=np.float64) + origin for k in getattr(target, "keepouts", ())]
+    return {
+        "width": float(width),
+        "pads": (pads + origin).tolist(),
+        "keepouts": [k.tolist() for k in keepouts],
     }
 
 
