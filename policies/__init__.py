@@ -1,4 +1,5 @@
-"""Baseline policies for CNTDeposit-v0: random, constant flow, scripted, SB3 loaders.
+"""Baseline policies for CNTDeposit-v0: random, constant flow, scripted (the route follower
+for the route task, the tangent heuristic for the thin one), SB3 loaders.
 
 Every policy has ``act(obs) -> action`` (float32 (2,) in [-1, 1]) and ``reset(seed)``
 (:class:`~policies.base.Policy`). ``pretrained/`` holds one trained model per algorithm
@@ -8,6 +9,7 @@ Every policy has ``act(obs) -> action`` (float32 (2,) in [-1, 1]) and ``reset(se
 from pathlib import Path
 
 from .base import ConstantPolicy, Policy, RandomPolicy, action_from_flow
+from .route_follower import RouteFollower
 from .sb3 import SB3Policy, load_policy
 from .scripted import ScriptedPolicy
 
@@ -18,6 +20,7 @@ __all__ = [
     "ConstantPolicy",
     "Policy",
     "RandomPolicy",
+    "RouteFollower",
     "SB3Policy",
     "ScriptedPolicy",
     "action_from_flow",

@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from cnt_env.task import routes
 from cnt_env.task import targets as targets_mod
-from cnt_env.task.scoring import THIN_WEIGHTS, score_trace
+from cnt_env.task.scoring import THIN_WEIGHTS, score_route_trace, score_trace
 from cnt_env.task.spaces import action_from_flow
 
 __all__ = ["ConstantTrace", "grid", "record_constant", "score_trace", "search"]
@@ -70,8 +71,15 @@ def search(
     target_names: Sequence[str],
     tolerance: float,
     weights: Sequence[float] = THIN_WEIGHTS,
+    score: str = "thin",
+    step_limits: Mapping[str, int] | None = None,
 ) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Best flow per target by mean offline score over seeds.
+
+    ``score``: the env's score mode; "thin" scores held-out targets
+    (:func:`~cnt_env.task.scoring.score_trace`), "corridor" held-out routes
+    (:func:`~cnt_env.task.scoring.score_route_trace`), each cut at its episode length
+    ``step_limits[name]`` (control steps; ``env.episode_steps_for(route)``).
 
     Returns ``(best, rows)``: ``best[target] = {"vbar", "phi", "score"}`` and one row
     per (target, flow) with the mean score terms."""
@@ -82,9 +90,20 @@ def search(
     rows: list[dict[str, Any]] = []
     best: dict[str, dict[str, Any]] = {}
     for name in target_names:
-        pts = targets_mod.held_out(name).points
+        if score == "corridor":
+            route = routes.held_out(name)
+            limit = (step_limits or {}).get(name)
+
+            def one(t: ConstantTrace, route=route, limit=limit) -> dict[str, float]:
+                return score_route_trace(t.trace, route, t.n_after_step[:limit])
+        else:
+            pts = targets_mod.held_out(name).points
+
+            def one(t: ConstantTrace, pts=pts) -> dict[str, float]:
+                return score_trace(t.trace, pts, tolerance, weights, t.n_after_step)
+
         for (vbar, phi), group in by_flow.items():
-            terms = [score_trace(t.trace, pts, tolerance, weights, t.n_after_step) for t in group]
+            terms = [one(t) for t in group]
             mean: Mapping[str, float] = {k: float(np.mean([x[k] for x in terms])) for k in terms[0]}
             rows.append({"target": name, "vbar": vbar, "phi": phi, **mean})
             if name not in best or mean["score"] > best[name]["score"]:

@@ -9,10 +9,27 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BASES", "combine", "make_base_policy"]
+__all__ = ["BASES", "WRAPPER", "combine", "make_base_policy", "residual_settings"]
 
 #: Base policies a residual agent can correct.
 BASES = ("scripted",)
+#: The rl-zoo ``env_wrapper`` entry of a residual agent (training/common.py).
+WRAPPER = "training.common.ResidualAction"
+
+
+def residual_settings(entry: dict) -> dict | None:
+    """The residual settings ``{"base", "scale"}`` of an rl-zoo config entry: its
+    ``env_wrapper`` ``training.common.ResidualAction`` (with its kwargs), or the older
+    ``residual`` key; None for a plain agent."""
+    if entry.get("residual"):
+        return dict(entry["residual"])
+    wrappers = entry.get("env_wrapper") or []
+    for w in wrappers if isinstance(wrappers, list) else [wrappers]:
+        if w == WRAPPER:
+            return {}
+        if isinstance(w, dict) and WRAPPER in w:
+            return dict(w[WRAPPER] or {})
+    return None
 
 
 def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.ndarray:
@@ -21,10 +38,15 @@ def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.n
     return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
-def make_base_policy(name: str, target_slice: slice, vbar_max: float):
-    """The base policy ``name`` for observations whose target points are ``target_slice``."""
+def make_base_policy(name: str, env):
+    """The base policy ``name`` for ``env`` (a CNTDeposit-v0, wrapped or not): "scripted"
+    is the scripted baseline of its task (the route follower for ``score="corridor"``,
+    the tangent heuristic for ``"thin"``)."""
+    from .route_follower import RouteFollower
     from .scripted import ScriptedPolicy
 
     if name not in BASES:
         raise ValueError(f"unknown residual base {name!r}; choose one of {BASES}")
-    return ScriptedPolicy(target_slice, vbar_max)
+    if env.unwrapped.score_mode == "corridor":
+        return RouteFollower.from_env(env)
+    return ScriptedPolicy.from_env(env)

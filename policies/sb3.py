@@ -1,16 +1,28 @@
 """Trained SB3 models as policies: the model zip and the VecNormalize statistics saved
-beside it (``<name>.zip`` + ``<name>_vecnormalize.pkl``, training/train.py)."""
+beside it (training/train.py): ``<name>_vecnormalize.npz`` + ``.json`` (arrays and
+settings, read without pickle; :func:`save_vecnormalize`, :func:`load_vecnormalize`),
+and VecNormalize's own ``<name>_vecnormalize.pkl`` (``VecNormalize.load``), used when the
+npz is absent (models trained before it)."""
 
 from __future__ import annotations
 
+import json
 import pickle
 from pathlib import Path
 
 import numpy as np
 
-from .residual import combine, make_base_policy
+from .residual import combine, make_base_policy, residual_settings
 
-__all__ = ["ALGOS", "SB3Policy", "load_policy", "vecnormalize_path"]
+__all__ = [
+    "ALGOS",
+    "NormalizerStats",
+    "SB3Policy",
+    "load_policy",
+    "load_vecnormalize",
+    "save_vecnormalize",
+    "vecnormalize_path",
+]
 
 ALGOS = ("ppo", "sac")
 
@@ -66,7 +78,9 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
     model = cls.load(str(model_path), device=device)
     vn = None
     vn_path = vecnormalize_path(model_path)
-    if vn_path.is_file():
+    if vn_path.with_suffix(".npz").is_file() and vn_path.with_suffix(".json").is_file():
+        vn = load_vecnormalize(vn_path)
+    elif vn_path.is_file():
         with vn_path.open("rb") as fh:
             vn = pickle.load(fh)
         vn.training = False
@@ -76,12 +90,59 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         import yaml
 
         cfg = yaml.safe_load(cfg_path.read_text()) or {}
-        residual = (cfg.get("CNTDeposit-v0") or {}).get("residual")
-        if residual:
+        entry = cfg.get("CNTDeposit-v0") or {}
+        residual = residual_settings(entry)
+        if residual is not None:
             from cnt_env.task import CNTDepositEnv
 
-            env = CNTDepositEnv(**(cfg["CNTDeposit-v0"].get("env_kwargs") or {}))
-            base = make_base_policy(residual.get("base", "scripted"),
-                                    env.observation_slices["target"], env.vbar_max)  # fmt: skip
+            env_kwargs = dict(entry.get("env_kwargs") or {})
+            env_kwargs.pop("max_episode_steps", None)  # gymnasium.make's, not the env's
+            base = make_base_policy(residual.get("base", "scripted"), CNTDepositEnv(**env_kwargs))
             scale = float(residual.get("scale", 0.5))
     return SB3Policy(model, vn, name=algo, base=base, scale=scale)
+
+
+class NormalizerStats:
+    """The observation normalisation of a saved VecNormalize, without a venv or pickle:
+    ``normalize_obs`` as VecNormalize's (clip((obs - mean) / sqrt(var + eps)))."""
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray, count: float, clip_obs: float,
+                 epsilon: float, norm_obs: bool) -> None:  # fmt: skip
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        self.obs_rms = RunningMeanStd(shape=mean.shape)
+        self.obs_rms.mean, self.obs_rms.var, self.obs_rms.count = mean, var, count
+        self.clip_obs, self.epsilon, self.norm_obs = clip_obs, epsilon, norm_obs
+        self.training = False
+
+    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+        if not self.norm_obs:
+            return obs
+        o = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
+        return np.clip(o, -self.clip_obs, self.clip_obs).astype(np.float32)
+
+
+def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
+    """Write ``<stem>.npz`` (obs and return running statistics) and ``<stem>.json``
+    (settings) for the VecNormalize ``venv``."""
+    stem = Path(stem)
+    arrays = {"obs_mean": venv.obs_rms.mean, "obs_var": venv.obs_rms.var,
+              "obs_count": np.array(venv.obs_rms.count), "ret_mean": venv.ret_rms.mean,
+              "ret_var": venv.ret_rms.var, "ret_count": np.array(venv.ret_rms.count)}  # fmt: skip
+    npz = stem.with_suffix(".npz")
+    np.savez(npz, **arrays)
+    meta = {"clip_obs": venv.clip_obs, "clip_reward": venv.clip_reward, "gamma": venv.gamma,
+            "epsilon": venv.epsilon, "norm_obs": venv.norm_obs, "norm_reward": venv.norm_reward,
+            "format": "cnt_env vecnormalize 1"}  # fmt: skip
+    js = stem.with_suffix(".json")
+    js.write_text(json.dumps(meta, indent=2) + "\n")
+    return npz, js
+
+
+def load_vecnormalize(stem: Path) -> NormalizerStats:
+    """The statistics written by :func:`save_vecnormalize` (for inference)."""
+    stem = Path(stem)
+    meta = json.loads(stem.with_suffix(".json").read_text())
+    with np.load(stem.with_suffix(".npz")) as d:
+        return NormalizerStats(d["obs_mean"], d["obs_var"], float(d["obs_count"]),
+                               meta["clip_obs"], meta["epsilon"], meta["norm_obs"])  # fmt: skip

@@ -35,9 +35,10 @@ from cnt_env.task.env import CNTDepositEnv, flow_from_action
 
 ENV_ID = "CNTDeposit-v0"
 # small rod: dt = 0.05 Hbar = 1.5 tau, so control_interval = 15 tau is 10 physics steps
+# the v0 contract runs on the thin task (score="thin"); the route task has its own tests
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              control_interval=15.0, reset_advance=2.0, pattern_every=10,
-             sim_options={"dt_factor": 0.05})  # fmt: skip
+             sim_options={"dt_factor": 0.05}, score="thin")  # fmt: skip
 REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
 
 # Warnings the checkers may raise that are not defects of this env, as (message
@@ -130,7 +131,11 @@ def test_import_is_light_and_registers_the_env() -> None:
 
 
 def test_defaults_are_the_paper_serpentine_baseline() -> None:
-    env = CNTDepositEnv()  # construction only: no simulation until reset
+    route = CNTDepositEnv()  # the route task: 12 Hbar per step, the corridor's slice
+    assert route.score_mode == "corridor" and route.n_substeps == 60
+    assert route.observation_space.shape == (84,)
+    assert list(route.observation_structure)[-1] == "route"
+    env = CNTDepositEnv(score="thin")  # construction only: no simulation until reset
     p = env.params
     assert (p.Hbar, p.Ibar, p.kappa_c_bar, p.vbar) == (155.0, 300.0, 0.2, 0.037)
     assert env.substrate == "stepped" and env.vbar_max == 0.13
@@ -168,7 +173,9 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      progress_weight=0.0), dict(pattern_every=-1), dict(render_mode="ascii"),
      dict(warmup_seed=-1), dict(warmup_seed=1.5), dict(cache_dir=123), dict(drag_law="x"),
      dict(families="line"), dict(families=("straight", 3)), dict(physics=[1, 2]),
-     dict(sim_options={"no_such_option": 1}), dict(tolerance="wide"), dict(vbar_max=True)],
+     dict(sim_options={"no_such_option": 1}), dict(tolerance="wide"), dict(vbar_max=True),
+     dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
+     dict(score="corridor", families=("zigzag",))],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
@@ -657,3 +664,98 @@ def test_fuzz_steps_are_finite_or_fail_cleanly(keywords, target, seed, acts, cac
             if terminated:
                 assert info["is_success"] or isinstance(info.get("failure"), str)
                 break
+
+
+# ---- the route task (score="corridor") ----------------------------------------------------
+
+ROUTE_KEYS = ("reward_progress", "reward_pads", "reward_completion", "reward_outside",
+              "reward_short", "reward_failure")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def rkw(kw: dict) -> dict:
+    return dict(kw, score="corridor")
+
+
+def test_route_task_spaces_and_reward_terms(rkw: dict) -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    env = CNTDepositEnv(**rkw)
+    with no_unexpected_warnings():
+        check_env(env, skip_render_check=True)
+    obs, info = env.reset(seed=1, options={"target": "u_turn"})
+    assert obs.shape == (84,) and env.observation_space.contains(obs)
+    assert info["route_width"] == 15.0 and info["score"] == 0.0
+    assert obs[env.observation_slices["route"]][0] == 15.0
+    total = 0.0
+    for a in actions(3, 12):
+        obs, r, _, _, info = env.step(a)
+        total += r
+        assert set(ROUTE_KEYS) <= set(info)
+        assert r == pytest.approx(sum(info[k] for k in ROUTE_KEYS), abs=1e-12)
+        assert 0.0 <= info["score"] <= 1.0 and env.observation_space.contains(obs)
+    assert total == pytest.approx(info["score"], abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    "target",
+    [
+        [[0.0, 0.0], [40.0, 0.0]],
+        {"waypoints": [[5, 5], [5, 45]], "width": 9.0, "pads": [[[0, 25], [10, 25]]],
+         "keepouts": [{"rect": [20, 5, 30, 40]}], "name": "mine"},
+        "u_turn",
+        "staircase",
+    ],
+)  # fmt: skip
+def test_route_targets_in_every_form(rkw: dict, target) -> None:
+    from cnt_env.task import routes
+
+    env = CNTDepositEnv(**rkw)
+    _, info = env.reset(seed=0, options={"target": target})
+    r = env.target
+    assert isinstance(r, routes.Route) and np.array_equal(r.waypoints[0], [0.0, 0.0])
+    if isinstance(target, dict):
+        assert r.name == "mine" and r.width == 9.0 and len(r.pads) == 1
+        assert np.allclose(r.keepouts[0].min(axis=0), [15.0, 0.0])  # moved with the route
+        assert info["n_pads"] == 1
+    assert env.max_episode_steps == env.episode_steps_for(r) > 10
+    same = routes.resolve(r.to_dict(), np.random.default_rng(0))
+    assert np.array_equal(same.waypoints, r.waypoints) and same.width == r.width
+
+
+@pytest.mark.parametrize("bad", [[[0, 0], [1e-300, 0]], [[0, 0], [0.5, 0]], "nowhere",
+                                 {"waypoints": [[0, 0], [9, 0]], "width": 0.1},
+                                 {"points": [[0, 0], [9, 0]]}])  # fmt: skip
+def test_degenerate_route_raises_and_the_env_stays_usable(rkw: dict, bad) -> None:
+    env = CNTDepositEnv(**rkw)
+    env.reset(seed=0, options={"target": "u_turn"})
+    env.step(np.zeros(2, np.float32))
+    with pytest.raises(ValueError):
+        env.reset(seed=0, options={"target": bad})
+    obs, *_ = env.step(np.zeros(2, np.float32))  # the earlier episode goes on
+    assert np.all(np.isfinite(obs))
+    env.reset(seed=0, options={"target": [[0, 0], [30, 0]]})
+
+
+def test_route_episode_truncates_at_its_length_and_completes(rkw: dict) -> None:
+    env = CNTDepositEnv(**rkw)
+    env.reset(seed=0, options={"target": [[0.0, 0.0], [0.0, -400.0]]})
+    assert env.max_episode_steps > 1000  # long route, long episode
+    env.reset(seed=0, options={"target": [[0.0, 0.0], [1.5, 0.0]]})
+    n, k, term, trunc = env.max_episode_steps, 0, False, False
+    while not (term or trunc):
+        _, _, term, trunc, info = env.step(np.zeros(2, np.float32))
+        k += 1
+    # a 1.5 L_vb route inside a 15 L_vb corridor is completed by the first nodes laid
+    assert term and info["completed"] and info["is_success"] and k < n
+
+
+def test_route_families_draw_deterministically(rkw: dict) -> None:
+    from cnt_env.task import routes
+
+    for fam in routes.FAMILIES:
+        env = CNTDepositEnv(**dict(rkw, families=fam, difficulty=0.9))
+        a = env.reset(seed=5)[1]
+        b = env.reset(seed=5)[1]
+        assert a["target"] == b["target"] == fam
+        assert a["target_length"] == b["target_length"]

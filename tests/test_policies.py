@@ -27,7 +27,7 @@ from policies.scripted import amplitude_curve
 
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              control_interval=15.0, reset_advance=2.0, pattern_every=0,
-             sim_options={"dt_factor": 0.05})  # fmt: skip
+             sim_options={"dt_factor": 0.05}, score="thin")  # fmt: skip
 
 
 @pytest.fixture(scope="module", autouse=True)

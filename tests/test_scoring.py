@@ -46,3 +46,60 @@ def test_cut_at_the_step_that_covers_the_end() -> None:
     cut = score_trace(trace, LINE, 1.0, n_after_step=np.array([10, 21, 30, 41]))
     assert cut["precision"] == 1.0  # nothing past the end point counted
     assert score_trace(trace, LINE, 1.0)["precision"] < 1.0
+
+
+# ---- the corridor score -------------------------------------------------------------------
+
+U = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, 40.0], [0.0, 40.0]])
+
+
+def _along(points: np.ndarray, step: float = 1.0) -> np.ndarray:
+    from cnt_env.task.targets import resample
+
+    return resample(points, step)[0]
+
+
+def test_route_laid_inside_the_corridor_scores_one() -> None:
+    from cnt_env.task.scoring import RouteScore
+
+    score = RouteScore(U, 15.0, np.zeros((0, 2, 2)), ())
+    m = score.update(_along(U) + np.array([0.0, 5.0]), 0)  # 5 L_vb off the line: inside
+    assert m["progress"] == 1.0 and m["completed"] and m["outside"] == 0.0
+    assert float(np.sum(score.potentials(m))) == pytest.approx(1.0)
+
+
+def test_route_progress_cannot_skip_a_fold() -> None:
+    from cnt_env.task.scoring import RouteScore
+
+    # a trace straight from the start up to the last leg: inside the corridor at both
+    # ends, but the route's middle is never followed
+    trace = _along(np.array([[0.0, 0.0], [0.0, 40.0]]))
+    m = RouteScore(U, 25.0, np.zeros((0, 2, 2)), ()).update(trace, len(trace))
+    assert m["progress"] < 0.5 and not m["completed"]
+
+
+def test_route_outside_pads_and_shorts() -> None:
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore, score_route_trace
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    pads = np.array([[[20.0, -5.0], [20.0, 5.0]]])
+    keep = (rectangle(10.0, 3.0, 30.0, 10.0),)
+    half = _along(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    score = RouteScore(line, 4.0, pads, keep)
+    m = score.update(half, len(half))
+    terms = score.potentials(m)
+    # G = 10/40 with weights (0.8, 0.2, 0.2) / 1.2, nothing outside, no pad yet
+    assert m["pads_crossed"] == 0 and terms[0] == pytest.approx(0.8 * 0.25 / 1.2)
+    zig = _along(np.array([[0.0, 0.0], [25.0, 0.0], [25.0, 6.0], [40.0, 6.0]]))
+    m = score.update(zig, len(zig))
+    assert m["pads_crossed"] == 1 and m["shorts"] > 0 and m["outside"] > 0
+    t = score.potentials(m)
+    a = t[:3].sum()
+    o, k = m["outside"], min(1.0, 0.05 * m["shorts"])
+    assert t.sum() == pytest.approx(a * (1 - o) * (1 - k))
+    assert 0.0 <= t.sum() <= 1.0
+    from cnt_env.task.routes import Route
+
+    r = Route(line, 4.0, pads, keep)
+    assert score_route_trace(zig, r)["score"] == pytest.approx(t.sum())

@@ -209,3 +209,48 @@ def test_patterns_measure_a_serpentine_target_as_drawn() -> None:
     m = measure(pts, MeasureOptions(transient_length=0.0), substrate="stepped")
     assert m["amplitude"] == pytest.approx(20.0, rel=0.02)
     assert m["wavelength"] == pytest.approx(8.0, rel=0.02)
+
+
+# ---- routes (cnt_env/task/routes.py) --------------------------------------------------------
+
+
+def test_route_families_are_valid_and_scale_with_difficulty() -> None:
+    from cnt_env.task import routes
+
+    for fam in routes.FAMILIES:
+        easy = [routes.draw(fam, np.random.default_rng(s), 0.0) for s in range(8)]
+        hard = [routes.draw(fam, np.random.default_rng(s), 1.0) for s in range(8)]
+        for r in easy + hard:
+            assert r.name == fam and np.array_equal(r.waypoints[0], [0.0, 0.0])
+            assert r.width >= routes.MIN_HALF_WIDTH and r.length >= 10.0
+        if fam not in ("band", "detour"):  # a detour's length follows its corridor's width
+            assert np.mean([r.length for r in hard]) > np.mean([r.length for r in easy]), fam
+        if fam != "band":
+            assert np.mean([r.width for r in hard]) < np.mean([r.width for r in easy]), fam
+    detour = routes.draw("detour", np.random.default_rng(0))
+    assert len(detour.keepouts) == 1
+    assert len(routes.draw("pads", np.random.default_rng(0)).pads) >= 1
+
+
+def test_held_out_routes_are_fixed_and_never_sampled() -> None:
+    from cnt_env.task import routes
+
+    assert "u_turn" in routes.HELD_OUT
+    u = routes.held_out("u_turn")
+    assert u.length == pytest.approx(160.0) and u.width == 15.0  # 60 + 40 + 60
+    rng = np.random.default_rng(0)
+    names = {routes.sample(rng).name for _ in range(200)}
+    assert names == set(routes.FAMILIES) and not names & set(routes.HELD_OUT)
+    with pytest.raises(ValueError):
+        routes.held_out("nope")
+
+
+def test_route_keepouts_stay_off_the_route() -> None:
+    from cnt_env.task import routes
+    from cnt_env.task.scoring import RouteScore
+
+    for name in routes.HELD_OUT:
+        r = routes.held_out(name)
+        line = T.resample(r.waypoints, 0.5)[0]
+        m = RouteScore(r.waypoints, r.width, r.pads, r.keepouts).update(line, len(line))
+        assert m["shorts"] == 0 and m["completed"] and m["pads_crossed"] == len(r.pads), name

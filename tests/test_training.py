@@ -75,7 +75,7 @@ def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
 def test_evaluate_one_target_with_pretrained_models(tmp_path: Path) -> None:
     from training.evaluate import ALL_POLICIES, evaluate
 
-    config = {"max_episode_steps": 4, "env_kwargs": {"pattern_every": 0}}
+    config = {"max_episode_steps": 4, "env_kwargs": {"pattern_every": 0, "score": "thin"}}
     table = evaluate(list(ALL_POLICIES), ["jog"], [0, 1, 2], config, tmp_path,
                      constant_from=RESULTS / "constant_best.json", jobs=2)  # fmt: skip
     overall = {r["policy"]: r for r in table if r["target"] == "ALL"}
@@ -92,3 +92,40 @@ def test_evaluate_one_target_with_pretrained_models(tmp_path: Path) -> None:
         s = summary["policies"][p]
         assert set(s) == {"score_mean", "score_std"} and 0.0 <= s["score_mean"] <= 1.0
     assert (tmp_path / "traces_jog.png").is_file()
+
+
+def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
+    """rl-zoo config forms (normalize: true, lin_ schedule, string policy_kwargs,
+    max_episode_steps under env_kwargs, callbacks), best_model.zip, VecNormalize as
+    npz + JSON read back, task metrics in tensorboard, and no overwritten run."""
+    from training.common import fresh_dir
+    from training.train import train
+
+    env_kwargs = {k: v for k, v in SMALL.items()}
+    config = {
+        "n_timesteps": 128, "policy": "MlpPolicy", "n_envs": 1, "vec_env": "dummy",
+        "normalize": True, "env_kwargs": {**env_kwargs, "max_episode_steps": 16},
+        "callback": [{"training.callbacks.HeldOutEval": {"eval_targets": ["u_turn"],
+                                                         "eval_freq": 64,
+                                                         "n_eval_episodes": 1}}],
+        "n_steps": 32, "batch_size": 16, "n_epochs": 1, "learning_rate": "lin_3e-4",
+        "policy_kwargs": "dict(net_arch=[8, 8])",
+    }  # fmt: skip
+    run = fresh_dir(tmp_path / "ppo_s0")
+    model = train("ppo", config, run, seed=0, progress_bar=False)
+    assert (run / "best_model.zip").is_file() and (run / "evaluations.npz").is_file()
+    for suffix in (".npz", ".json", ".pkl"):
+        assert model.with_name(f"ppo_vecnormalize{suffix}").is_file()
+    policy = load_policy(model)
+    assert type(policy.vecnormalize).__name__ == "NormalizerStats"
+    import pickle
+
+    with model.with_name("ppo_vecnormalize.pkl").open("rb") as fh:
+        vn = pickle.load(fh)
+    assert np.array_equal(policy.vecnormalize.obs_rms.mean, vn.obs_rms.mean)
+    obs = np.linspace(-3, 3, vn.obs_rms.mean.size).astype(np.float32)[None]
+    assert np.allclose(policy.vecnormalize.normalize_obs(obs), vn.normalize_obs(obs))
+    events = b"".join(p.read_bytes() for p in (run / "tb").rglob("events.out.tfevents*"))
+    assert b"task/score" in events and b"task/progress" in events
+    again = fresh_dir(tmp_path / "ppo_s0")
+    assert again != run and again.name == "ppo_s0_2"

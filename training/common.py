@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
+from cnt_env.task import routes
 from cnt_env.task import targets as targets_mod
 from policies.residual import combine, make_base_policy
 
@@ -20,10 +21,17 @@ __all__ = [
     "ENV_ID",
     "HeldOutCycle",
     "ResidualAction",
+    "algo_kwargs",
+    "callback_settings",
     "env_settings",
+    "eval_settings",
+    "fresh_dir",
+    "held_out_names",
     "limit_threads",
     "load_config",
     "make_env",
+    "normalize_settings",
+    "score_mode",
 ]
 
 ENV_ID = "CNTDeposit-v0"
@@ -32,7 +40,15 @@ CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 NON_ALGO_KEYS = frozenset({
     "n_timesteps", "policy", "n_envs", "normalize", "env_kwargs", "max_episode_steps",
     "eval_freq", "n_eval_episodes", "eval_targets", "save_freq", "vec_env", "residual",
+    "env_wrapper", "callback",
 })  # fmt: skip
+#: Registered episode cap (TimeLimit) when a config gives none: the env's own.
+DEFAULT_MAX_EPISODE_STEPS = 400
+#: The project's callbacks in a config's ``callback`` list (rl-zoo style: a name, or a
+#: one-key dict name -> kwargs).
+EVAL_CALLBACK = "training.callbacks.HeldOutEval"
+CHECKPOINT_CALLBACK = "training.callbacks.Checkpoint"
+TASK_METRICS_CALLBACK = "training.callbacks.TaskMetrics"
 
 
 def limit_threads() -> None:
@@ -57,8 +73,86 @@ def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
 
 
 def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
-    """``(env_kwargs, max_episode_steps)`` of a config."""
-    return dict(config.get("env_kwargs") or {}), int(config["max_episode_steps"])
+    """``(env_kwargs, max_episode_steps)`` of a config: the TimeLimit from
+    ``env_kwargs.max_episode_steps`` (rl-zoo: env_kwargs go to ``gymnasium.make``) or the
+    older top-level key; the env's kwargs without it."""
+    env_kwargs = dict(config.get("env_kwargs") or {})
+    steps = env_kwargs.pop("max_episode_steps", None)
+    if steps is None:
+        steps = config.get("max_episode_steps", DEFAULT_MAX_EPISODE_STEPS)
+    return env_kwargs, int(steps)
+
+
+def callback_settings(config: dict[str, Any], name: str) -> dict[str, Any] | None:
+    """The kwargs of callback ``name`` in the config's ``callback`` list (None if absent)."""
+    entries = config.get("callback") or []
+    for c in entries if isinstance(entries, list) else [entries]:
+        if c == name:
+            return {}
+        if isinstance(c, dict) and name in c:
+            return dict(c[name] or {})
+    return None
+
+
+def eval_settings(config: dict[str, Any]) -> dict[str, Any]:
+    """``{"eval_targets", "eval_freq", "n_eval_episodes", "save_freq"}``: from the
+    ``callback`` entries HeldOutEval and Checkpoint, else the older top-level keys."""
+    ev = callback_settings(config, EVAL_CALLBACK)
+    ev = {k: config[k] for k in ("eval_targets", "eval_freq", "n_eval_episodes")
+          if k in config} if ev is None else ev  # fmt: skip
+    ck = callback_settings(config, CHECKPOINT_CALLBACK) or {}
+    targets = list(ev.get("eval_targets") or [])
+    return {
+        "eval_targets": targets,
+        "eval_freq": int(ev.get("eval_freq", 0)),
+        "n_eval_episodes": int(ev.get("n_eval_episodes", len(targets))),
+        "save_freq": int(ck.get("save_freq", config.get("save_freq", 0))),
+    }
+
+
+def normalize_settings(config: dict[str, Any]) -> dict[str, Any]:
+    """VecNormalize kwargs of ``normalize`` (rl-zoo: ``true``, a dict, or a string
+    ``"dict(norm_obs=True, norm_reward=False)"``); {} for none."""
+    from .callbacks import policy_kwargs
+
+    value = config.get("normalize")
+    if not value:
+        return {}
+    extra = {} if value is True else policy_kwargs(value)
+    return {"norm_obs": True, "norm_reward": True, **extra}
+
+
+def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:
+    """The algorithm's keyword arguments: ``lin_`` schedules and string
+    ``policy_kwargs`` resolved (training/callbacks.py)."""
+    from .callbacks import policy_kwargs, schedule
+
+    out = {k: schedule(v) for k, v in config.items() if k not in NON_ALGO_KEYS}
+    if "policy_kwargs" in out:
+        out["policy_kwargs"] = policy_kwargs(out["policy_kwargs"])
+    return out
+
+
+def score_mode(env_kwargs: dict[str, Any]) -> str:
+    """The task of ``env_kwargs``: "corridor" (routes, the env's default) or "thin"."""
+    return str(env_kwargs.get("score", "corridor"))
+
+
+def held_out_names(env_kwargs: dict[str, Any]) -> tuple[str, ...]:
+    """The held-out targets of the task of ``env_kwargs``."""
+    return routes.HELD_OUT if score_mode(env_kwargs) == "corridor" else targets_mod.HELD_OUT
+
+
+def fresh_dir(path: str | Path) -> Path:
+    """``path`` if it does not exist or is empty, else the first free ``path_2``,
+    ``path_3``, ...: a run never overwrites an earlier one. The directory is created."""
+    path = Path(path)
+    candidate, k = path, 1
+    while candidate.exists() and any(candidate.iterdir()):
+        k += 1
+        candidate = path.with_name(f"{path.name}_{k}")
+    candidate.mkdir(parents=True, exist_ok=True)
+    return candidate
 
 
 def make_env(env_kwargs: dict[str, Any], max_episode_steps: int, **extra) -> gym.Env:
@@ -76,9 +170,7 @@ class ResidualAction(gym.Wrapper):
     def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5) -> None:
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
-        base_env = env.unwrapped
-        self.base = make_base_policy(base, base_env.observation_slices["target"],
-                                     base_env.vbar_max)  # fmt: skip
+        self.base = make_base_policy(base, env)
         self._obs: np.ndarray | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -100,11 +192,10 @@ class HeldOutCycle(gym.Wrapper):
 
     def __init__(self, env: gym.Env, targets: Sequence[str], seed0: int = 1000) -> None:
         super().__init__(env)
+        known = held_out_names({"score": env.unwrapped.score_mode})
         for t in targets:
-            if t not in targets_mod.HELD_OUT:
-                raise ValueError(
-                    f"{t!r} is not a held-out target; choose from {targets_mod.HELD_OUT}"
-                )
+            if t not in known:
+                raise ValueError(f"{t!r} is not a held-out target; choose from {known}")
         self.targets = tuple(targets)
         self.seed0 = int(seed0)
         self._k = 0

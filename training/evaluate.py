@@ -46,9 +46,18 @@ from typing import Any
 
 import numpy as np
 
-from cnt_env.task import targets as targets_mod
+from cnt_env.task import routes
 
-from .common import CONFIG_DIR, env_settings, limit_threads, load_config, make_env
+from .common import (
+    CONFIG_DIR,
+    env_settings,
+    fresh_dir,
+    held_out_names,
+    limit_threads,
+    load_config,
+    make_env,
+    score_mode,
+)
 
 __all__ = ["ALL_POLICIES", "evaluate", "main"]
 
@@ -72,14 +81,16 @@ COLORS = {"random": "0.6", "constant": "tab:orange", "scripted": "tab:green",
 
 
 def _make_policy(spec: dict[str, Any], env):
-    from policies import ConstantPolicy, RandomPolicy, ScriptedPolicy, load_policy
+    from policies import ConstantPolicy, RandomPolicy, RouteFollower, ScriptedPolicy, load_policy
 
     kind = spec["kind"]
     if kind == "random":
         return RandomPolicy()
     if kind == "constant":
         return ConstantPolicy(spec["vbar"], spec["phi"], env.unwrapped.vbar_max)
-    if kind == "scripted":
+    if kind == "scripted":  # the baseline of the env's task
+        if env.unwrapped.score_mode == "corridor":
+            return RouteFollower.from_env(env)
         return ScriptedPolicy.from_env(env)
     return load_policy(spec["model"])
 
@@ -146,13 +157,19 @@ def constant_search(env_kwargs, max_steps, targets, pool, out: Path) -> dict[str
     from policies.constant import grid, search
 
     env = make_env(env_kwargs, max_steps)
-    tol = env.unwrapped.tolerance
-    weights = tuple(float(w) for w in env.unwrapped.weights)
+    base = env.unwrapped
+    tol = base.tolerance
+    weights = tuple(float(w) for w in base.weights)
+    mode = base.score_mode
+    limits = None
+    if mode == "corridor":  # each route's own episode length (env.episode_steps_for)
+        limits = {t: min(max_steps, base.episode_steps_for(routes.held_out(t))) for t in targets}
+        max_steps = max(limits.values())
     env.close()
     flows = grid(CONSTANT_SPEEDS, CONSTANT_DIRECTIONS)
     jobs = [(env_kwargs, max_steps, v, p, s) for v, p in flows for s in CONSTANT_SEARCH_SEEDS]
     traces = pool.map(_record_constant, jobs, chunksize=1)
-    best, rows = search(traces, targets, tol, weights)
+    best, rows = search(traces, targets, tol, weights, score=mode, step_limits=limits)
     _write_csv(out / "constant_grid.csv", rows)
     meta = {"speeds": CONSTANT_SPEEDS, "n_directions": CONSTANT_DIRECTIONS,
             "search_seeds": CONSTANT_SEARCH_SEEDS, "max_episode_steps": max_steps,
@@ -264,7 +281,7 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
 
     def draw(ax, t):
         tgt = next(first[(p, t)]["target_points"] for p in policies if (p, t) in first)
-        ax.plot(tgt[:, 0], tgt[:, 1], color="red", lw=6, alpha=0.25, label="target (±τ_b)")
+        ax.plot(tgt[:, 0], tgt[:, 1], color="red", lw=6, alpha=0.25, label="target")
         for p in policies:
             if (p, t) in first:
                 tr = first[(p, t)]["trace"]
@@ -507,7 +524,9 @@ def _csv_list(text: str) -> list[str]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0])
     p.add_argument("--policies", default=",".join(ALL_POLICIES))
-    p.add_argument("--targets", default="all", help="held-out names, comma separated, or all")
+    p.add_argument("--targets", default="all",
+                   help="held-out names (routes, or thin targets with score: thin), comma "
+                        "separated, or all")  # fmt: skip
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml",
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
@@ -517,7 +536,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="training run directories for the learning curves")  # fmt: skip
     p.add_argument("--constant-from", type=Path, default=None,
                    help="reuse the constant flows of a constant_best.json")  # fmt: skip
-    p.add_argument("--out", type=Path, default=Path("training/results"))
+    p.add_argument("--out", type=Path, default=None,
+                   help="results directory (default: a new runs/evaluate/<task>, never "
+                        "the committed training/results unless given)")  # fmt: skip
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--save-episodes", type=Path, default=None,
                    help="save every episode (cnt_env.replay episode npz) here")  # fmt: skip
@@ -530,11 +551,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    targets = list(targets_mod.HELD_OUT) if args.targets == "all" else _csv_list(args.targets)
+    config = load_config(args.config)
+    env_kwargs, _ = env_settings(config)
+    names = held_out_names(env_kwargs)
+    targets = list(names) if args.targets == "all" else _csv_list(args.targets)
     seeds = [int(s) for s in _csv_list(args.seeds)]
     if len(seeds) < 1:
         raise SystemExit("give at least one seed")
-    evaluate(_csv_list(args.policies), targets, seeds, load_config(args.config), args.out,
+    out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
+    print(f"results -> {out}")
+    evaluate(_csv_list(args.policies), targets, seeds, config, out,
              models=args.models, runs=args.runs, constant_from=args.constant_from,
              jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
              reuse=args.reuse)  # fmt: skip

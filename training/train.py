@@ -3,20 +3,29 @@
     cnt-train --algo ppo [--config training/configs/ppo.yml] [--seed 0]
               [--n-timesteps N] [--max-wall-seconds S] [--out runs/] [--n-envs 2]
 
-One run directory ``<out>/<algo>_s<seed>/`` holds:
+One run directory ``<out>/<algo>_s<seed>/`` (``_2``, ``_3``, ... when it exists: a run
+never overwrites an earlier one) holds:
 
-* ``<algo>.zip`` and ``<algo>_vecnormalize.pkl`` (the VecNormalize statistics, beside
-  the model; load both with :func:`policies.load_policy`);
-* ``config.yml``: the resolved config (hyperparameters, env kwargs, seed, budget,
-  versions, wall time);
+* ``<algo>.zip``; the VecNormalize statistics beside it as
+  ``<algo>_vecnormalize.npz`` + ``.json`` (no pickle; :func:`policies.load_policy` reads
+  them) and VecNormalize's own ``<algo>_vecnormalize.pkl`` (``VecNormalize.load``);
+* ``best_model.zip`` (EvalCallback: the best mean return on the held-out routes);
+* ``config.yml`` and ``<algo>.yml``: the resolved config (hyperparameters, env kwargs,
+  seed, budget, versions, wall time);
 * ``evaluations.npz`` (EvalCallback on held-out targets) and ``learning_curve.csv``;
 * ``checkpoints/`` (CheckpointCallback, with VecNormalize), ``monitor/`` (Monitor CSVs),
-  ``tb/`` (tensorboard, if installed).
+  ``tb/`` (tensorboard: SB3's scalars and the task metrics under ``task/``: score,
+  coverage, progress, inside, shorts, completion of every finished episode).
 
-Configs are rl-zoo style: one YAML file per algorithm with an entry ``CNTDeposit-v0``
-holding the algorithm's keyword arguments plus ``n_timesteps``, ``policy``,
-``n_envs``, ``normalize``, ``env_kwargs``, ``max_episode_steps``, ``eval_freq``,
-``n_eval_episodes``, ``eval_targets`` and ``save_freq``.
+Configs are rl-zoo style (one YAML file per algorithm, an entry ``CNTDeposit-v0``):
+the algorithm's keyword arguments (``lin_<v>`` schedules, ``policy_kwargs`` as a string
+``"dict(net_arch=[64, 64])"``), ``n_timesteps``, ``policy``, ``n_envs``,
+``normalize: true``, ``env_kwargs`` (the env's keywords and ``max_episode_steps``, the
+TimeLimit), ``env_wrapper`` (``training.common.ResidualAction`` for a residual agent)
+and ``callback`` (``training.callbacks.HeldOutEval: {eval_targets, eval_freq,
+n_eval_episodes}``, ``training.callbacks.Checkpoint: {save_freq}``). The older
+top-level keys (``max_episode_steps``, ``eval_*``, ``save_freq``, ``residual``) still
+work.
 """
 
 from __future__ import annotations
@@ -33,17 +42,23 @@ import numpy as np
 import yaml
 
 from cnt_env.io import to_jsonable
+from policies.residual import residual_settings
+from policies.sb3 import save_vecnormalize, vecnormalize_path
 
+from .callbacks import make_task_metrics
 from .common import (
     CONFIG_DIR,
     ENV_ID,
-    NON_ALGO_KEYS,
     HeldOutCycle,
     ResidualAction,
+    algo_kwargs,
     env_settings,
+    eval_settings,
+    fresh_dir,
     limit_threads,
     load_config,
     make_env,
+    normalize_settings,
 )
 
 __all__ = ["main", "train"]
@@ -127,7 +142,8 @@ def train(
     run.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
 
-    residual = dict(config.get("residual") or {})
+    residual = residual_settings(config)
+    wrapper = ResidualAction if residual is not None else None
     venv = make_vec_env(
         ENV_ID,
         n_envs=n_envs,
@@ -135,49 +151,46 @@ def train(
         monitor_dir=str(run / "monitor"),
         env_kwargs={**env_kwargs, "max_episode_steps": max_steps},
         vec_env_cls=SubprocVecEnv if vec_env == "subproc" and n_envs > 1 else DummyVecEnv,
-        wrapper_class=ResidualAction if residual else None,
+        wrapper_class=wrapper,
         wrapper_kwargs=residual or None,
     )
-    normalize = config.get("normalize") or {}
-    if normalize:
-        norm = {"norm_obs": True, "norm_reward": True, **dict(normalize)}
+    norm = normalize_settings(config)
+    if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
 
-    algo_kwargs = {k: v for k, v in config.items() if k not in NON_ALGO_KEYS}
     tb = str(run / "tb") if _has_tensorboard() else None
     if tb is None:
         print("tensorboard is not installed: no tensorboard logs (pip install tensorboard)")
     model = cls(config.get("policy", "MlpPolicy"), venv, seed=seed, tensorboard_log=tb,
-                verbose=verbose, device="cpu", **algo_kwargs)  # fmt: skip
+                verbose=verbose, device="cpu", **algo_kwargs(config))  # fmt: skip
 
-    callbacks = []
+    callbacks = [make_task_metrics()]
     total = int(config["n_timesteps"])
-    eval_targets = list(config.get("eval_targets") or [])
-    eval_freq = int(config.get("eval_freq", 0))
-    if eval_targets and eval_freq > 0:
+    ev = eval_settings(config)
+    if ev["eval_targets"] and ev["eval_freq"] > 0:
 
         def eval_env_fn():
-            env = HeldOutCycle(make_env(env_kwargs, max_steps), eval_targets)
-            return Monitor(ResidualAction(env, **residual) if residual else env)
+            env = HeldOutCycle(make_env(env_kwargs, max_steps), ev["eval_targets"])
+            return Monitor(ResidualAction(env, **residual) if wrapper else env)
 
         eval_env = DummyVecEnv([eval_env_fn])
-        if normalize:
+        if norm:
             eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
                                     norm_obs=bool(norm["norm_obs"]))  # fmt: skip
         callbacks.append(
             EvalCallback(
                 eval_env,
-                n_eval_episodes=int(config.get("n_eval_episodes", len(eval_targets))),
-                eval_freq=max(1, eval_freq // n_envs),
+                n_eval_episodes=ev["n_eval_episodes"],
+                eval_freq=max(1, ev["eval_freq"] // n_envs),
                 log_path=str(run),
+                best_model_save_path=str(run),  # best_model.zip
                 deterministic=True,
                 verbose=verbose,
             )
         )
-    save_freq = int(config.get("save_freq", 0))
-    if save_freq > 0:
-        ckpt = CheckpointCallback(max(1, save_freq // n_envs), str(run / "checkpoints"),
-                                  name_prefix=algo, save_vecnormalize=bool(normalize))  # fmt: skip
+    if ev["save_freq"] > 0:
+        ckpt = CheckpointCallback(max(1, ev["save_freq"] // n_envs), str(run / "checkpoints"),
+                                  name_prefix=algo, save_vecnormalize=bool(norm))  # fmt: skip
         callbacks.append(ckpt)
     ProgressBar, WallClockLimit = _callbacks_module()
     if progress_bar:
@@ -188,8 +201,10 @@ def train(
     model.learn(total_timesteps=total, callback=callbacks, tb_log_name=algo)
     model_path = run / f"{algo}.zip"
     model.save(str(model_path))
-    if normalize:
-        venv.save(str(run / f"{algo}_vecnormalize.pkl"))
+    if norm:
+        stem = vecnormalize_path(model_path)
+        venv.save(str(stem))  # VecNormalize's own format (pickle), for VecNormalize.load
+        save_vecnormalize(venv, stem)  # npz + JSON, what policies.load_policy reads
     venv.close()
     wall = time.perf_counter() - t_start
 
@@ -262,8 +277,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.n_envs is not None:
         config["n_envs"] = args.n_envs
     if args.max_episode_steps is not None:
-        config["max_episode_steps"] = args.max_episode_steps
-    run = args.out / f"{args.algo}_s{args.seed}"
+        config.setdefault("env_kwargs", {})
+        config["env_kwargs"] = {**(config["env_kwargs"] or {}),
+                                "max_episode_steps": args.max_episode_steps}  # fmt: skip
+        config.pop("max_episode_steps", None)
+    run = fresh_dir(args.out / f"{args.algo}_s{args.seed}")  # never overwrites a run
     train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
           max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,
           verbose=args.verbose)  # fmt: skip

@@ -1,4 +1,4 @@
-"""``CNTDeposit-v0``: steer the gas flow so that a depositing CNT lays a target path.
+"""``CNTDeposit-v0``: steer the gas flow so that a depositing CNT lays a circuit route.
 
 The env only translates (docs/architecture.md rule 3): actions to a flow
 (:mod:`cnt_env.task.spaces`), the simulator's state to observations (``spaces``,
@@ -25,9 +25,10 @@ from cnt_env.sim.deposition import DepositionSim
 from cnt_env.sim.forces import DRAG_LAWS
 from cnt_env.sim.stepper import SimulationError
 from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_state
-from cnt_env.task import raster, settings
+from cnt_env.task import raster, routes, settings
 from cnt_env.task import targets as targets_mod
-from cnt_env.task.scoring import COVERAGE_SPACING, ThinScore
+from cnt_env.task.routes import DEFAULT_HALF_WIDTH, Route
+from cnt_env.task.scoring import COVERAGE_SPACING, ROUTE_TERMS, RouteScore, ThinScore
 from cnt_env.task.spaces import (
     LAID_RATIO_BOUND,
     LEAN_HEIGHT_FRACTIONS,
@@ -35,17 +36,36 @@ from cnt_env.task.spaces import (
     POSITION_BOUND,
     ObservationLayout,
     flow_from_action,
+    nearest_on_polygons,
     rod_features,
 )
-from cnt_env.task.targets import Target
 
 __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 
 #: Default speed cap of the flow, in units of e_v / (mu H) (the paper's range, docs/model.md §6).
 DEFAULT_VBAR_MAX = 0.13
 #: The default control interval is this many Hbar (time units tau), rounded to whole
-#: physics steps: about 1 L_vb of trace, since the deposition speed is ~0.65 / Hbar.
-CONTROL_INTERVAL_HBAR = 1.5
+#: physics steps, per score mode. The deposition speed is ~0.68 L_vb / Hbar. "thin" (v0):
+#: ~1 L_vb of trace. "corridor": ~8 L_vb, the median trace laid before the suspended rod
+#: leans the new way after a switch of the flow direction (8.0 at H̄/2, 8.5 at 8 L_vb;
+#: benchmarks/results/step_response.json), so the agent never acts faster than the rod
+#: can follow; the pattern's drift follows in a median 12 L_vb.
+CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 12.0}
+#: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.027 L_vb per 1.5 Hbar step in
+#: benchmarks/results/step_response.json).
+DEPOSITION_SPEED = 0.68
+#: Progress of the pattern along a route per L_vb of trace at the slowest useful flow
+#: (the serpentine across the steps at v̄ = 0.13 drifts 0.21; along the steps 0.34-0.58;
+#: benchmarks/results/step_response.json): it sets the per-route episode length.
+PROGRESS_RATE = 0.2
+#: Route episodes last ROUTE_STEPS_SLACK times the steps the measured rate needs, plus
+#: ROUTE_STEPS_MARGIN (the pattern's response to the first turn).
+ROUTE_STEPS_SLACK = 1.5
+ROUTE_STEPS_MARGIN = 10
+#: Trace window (L_vb) the K trace points of the observation span in the route task:
+#: about the 60 L_vb whose mean is the pattern's centre.
+ROUTE_TRACE_WINDOW = 64.0
+SCORES = ("corridor", "thin")
 #: Episode length registered with ``max_episode_steps`` (TimeLimit; its one home is
 #: cnt_env/__init__.py): ~400 L_vb of trace, about 4 periods of the baseline serpentine
 #: (benchmarks/env_throughput.py --baseline: amplitude ~24, wavelength ~7.7, ~95 L_vb of
@@ -57,14 +77,17 @@ OBS_MODES = ("vector", "image")
 # Pattern measurements kept in info["pattern"] (patterns.measure keys).
 _PATTERN_KEYS = ("pattern", "measured_length", "amplitude", "peak_to_peak", "wavelength",
                  "coil_radius", "n_uturns", "n_cycles", "n_loops", "n_self_crossings")  # fmt: skip
-_REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
+_REWARD_KEYS = {
+    "thin": ("reward_coverage", "reward_precision", "reward_progress", "reward_failure"),
+    "corridor": (*(f"reward_{t}" for t in ROUTE_TERMS), "reward_failure"),
+}
 _MEASURE_OPTIONS = MeasureOptions(transient_length=0.0)
 # re-exported for callers of the v0 layout
 __all__ += ["COVERAGE_SPACING", "LAID_RATIO_BOUND", "POSITION_BOUND"]
 
 
 class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
-    r"""Flow-directed deposition of a carbon nanotube onto a target circuit path.
+    r"""Flow-directed deposition of a carbon nanotube along a target circuit route.
 
     ## Description
 
@@ -72,145 +95,146 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     the top and falls onto a substrate (the x-z plane, y up), where van der Waals
     adhesion makes it stick (docs/model.md §1, §4). The shape it leaves, the *trace*, is a
     coil on a flat sticky substrate and a serpentine on a stepped one with flow (§5-6).
-    The agent sets the rarefied gas flow, in the substrate plane, every control
-    interval. The task: make the trace follow a target path (a polyline in the
-    substrate plane that starts at the contact point; :mod:`cnt_env.task.targets`).
+    The agent sets the rarefied gas flow in the substrate plane every control interval.
+    The flow steers the pattern's *drift*: across the steps (±x) a serpentine band ~27 L_vb
+    wide drifts ~0.21 L_vb per L_vb of trace at v̄ = 0.13; along them (±z) an almost
+    straight run drifts 0.34-0.58 (benchmarks/results/step_response.json).
 
-    All quantities are dimensionless (docs/model.md §2): lengths in L_vb = sqrt(k_b / e_v),
-    time in tau = mu L_vb² / e_v, flow speeds v̄ in units of e_v / (mu H).
+    The task (``score="corridor"``, default; docs/task.md): lay the trace along a circuit
+    route (:class:`~cnt_env.task.routes.Route`): waypoints from the contact point, a
+    corridor of half-width w (default 15 L_vb), optional pads to cross and keep-out
+    regions to avoid. ``score="thin"`` keeps the v0 task: follow a thin polyline within
+    τ_b = ``tolerance`` (:mod:`cnt_env.task.targets`).
+
+    Units (docs/model.md §2): lengths in L_vb = sqrt(k_b / e_v), time in
+    tau = mu L_vb² / e_v, flow speeds v̄ in e_v / (mu H).
 
     ## Action Space
 
-    ``Box(-1, 1, (2,), float32)``: the flow velocity in the substrate plane. The square
-    is mapped one-to-one onto the disk of radius ``vbar_max`` (elliptical grid map,
-    :func:`flow_from_action`), so the speed never exceeds ``vbar_max``. Out-of-range
-    actions are clipped (an action past a bound acts exactly like the bound); a NaN or
-    infinite action raises ``ValueError`` and leaves the env untouched.
-
-    | Num | Action                                  | Min | Max | Unit              |
-    |-----|-----------------------------------------|-----|-----|-------------------|
-    | 0   | flow along x (across the steps), scaled | -1  | 1   | v̄_max             |
-    | 1   | flow along z (along the steps), scaled  | -1  | 1   | v̄_max             |
-
-    The flow is held for ``control_interval`` (tau), simulated as ``n_substeps``
-    physics steps of ``dt``; the default lays about 1 L_vb of trace per control step.
+    ``Box(-1, 1, (2,), float32)``: the flow (x, z) / v̄_max, mapped one-to-one onto the
+    disk of radius ``vbar_max`` (elliptical grid map, :func:`flow_from_action`; inverse
+    :func:`cnt_env.task.spaces.action_from_flow`). Out-of-range actions are clipped (past a
+    bound acts exactly like the bound); a NaN or infinite action raises ``ValueError`` and
+    leaves the env untouched. The flow is held for ``control_interval`` (tau), simulated
+    as ``n_substeps`` physics steps of ``dt``. Default: 12 H̄ (~8 L_vb of trace) for
+    routes, the median trace laid before the suspended rod leans the new way after a
+    switch of direction (step response: 8-8.5 L_vb; the pattern's drift follows in a
+    median 12); 1.5 H̄ (~1 L_vb) for ``score="thin"``.
 
     ## Observation Space
 
-    ``obs_mode="vector"`` (default): a flat ``Box`` of float32 with finite bounds. With
-    K = ``n_trace_points`` and M = ``n_target_points`` (16 each by default: 81 values),
-    in order (``observation_structure`` gives the sizes, ``observation_slices`` the
-    slices). The *contact point* is the last deposited node; positions are (x, z)
-    relative to it, clipped to ±``POSITION_BOUND`` = 1000 L_vb.
+    ``obs_mode="vector"`` (default): a flat float32 ``Box`` with finite bounds, in order
+    (``observation_structure`` sizes, ``observation_slices`` slices; K =
+    ``n_trace_points``, M = ``n_target_points``, 16 each: 84 values for routes, 81 thin).
+    Positions are (x, z) relative to the contact point (the last deposited node), clipped
+    to ±1000 L_vb.
 
-    | Slice    | Size | Observation                                        | Bounds  | Unit |
-    |----------|------|----------------------------------------------------|---------|------|
-    | trace    | 2K   | last K deposited nodes before the contact point,   | ±1000   | L_vb |
-    |          |      | oldest first, (x, z) pairs, δ̄ apart along the      |         |      |
-    |          |      | trace (padded with the oldest while shorter)       |         |      |
-    | target   | 2M   | M target points ahead of the furthest covered one, | ±1000   | L_vb |
-    |          |      | ``target_spacing`` apart in arc length, (x, z)     |         |      |
-    |          |      | pairs (the end point repeats past the end)         |         |      |
-    | flow     | 2    | current flow (v̄ cos φ, v̄ sin φ) / v̄_max            | ±1      | 1    |
-    | rod      | 1    | height y_c of the contact node                     | ±1000   | L_vb |
-    |          | 2    | horizontal unit direction (x, z) of the contact    | ±1      | 1    |
-    |          |      | edge (from the contact point to the contact node)  |         |      |
-    |          | 8    | horizontal offset (x, z) of the suspended rod at   | ±1000   | L_vb |
-    |          |      | heights 2, 8, H̄/2 and H̄: where it leans            |         |      |
-    | progress | 3    | progress G, coverage C, precision P (see Rewards)  | [0, 1]  | 1    |
-    |          | 1    | length laid this episode / target length           | [0, 100]| 1    |
+    | Slice    | Size | Observation                                           | Bounds  | Unit |
+    |----------|------|-------------------------------------------------------|---------|------|
+    | trace    | 2K   | routes: K points evenly spaced over the last          | ±1000   | L_vb |
+    |          |      | ``trace_window`` (64) L_vb of trace (their mean is    |         |      |
+    |          |      | the pattern's centre); thin: the last K nodes         |         |      |
+    | target   | 2M   | M route points ahead of the furthest point reached,   | ±1000   | L_vb |
+    |          |      | ``target_spacing`` apart (the end repeats)            |         |      |
+    | flow     | 2    | current flow (v̄ cos φ, v̄ sin φ) / v̄_max               | ±1      | 1    |
+    | rod      | 1    | height y_c of the contact node                        | ±1000   | L_vb |
+    |          | 2    | horizontal unit direction of the contact edge         | ±1      | 1    |
+    |          | 8    | rod's horizontal offset at heights 2, 8, H̄/2, H̄       | ±1000   | L_vb |
+    | progress | 3    | progress G, coverage, precision (inside fraction)     | [0, 1]  | 1    |
+    |          | 1    | length laid this episode / target length              | [0, 100]| 1    |
+    | route    | 1    | corridor half-width w (routes only)                   | [0,1000]| L_vb |
+    |          | 2    | nearest keep-out boundary point (1000 when none)      | ±1000   | L_vb |
 
-    ``obs_mode="image"``: ``Box(0, 255, (S, S, 3), uint8)`` with S = ``image_size``
-    (>= 64), a top view of ``image_extent`` L_vb square centred on the contact point,
-    x to the right and z up. Channel 0: the trace (255 laid in this episode, 128
-    before); channel 1: the target (255 not yet covered, 128 covered); channel 2: the
-    horizontal projection of the suspended rod.
+    ``obs_mode="image"``: ``Box(0, 255, (S, S, 3), uint8)``, S = ``image_size`` (>= 64), a
+    top view ``image_extent`` L_vb square centred on the contact point (x right, z up):
+    channel 0 the trace (255 this episode, 128 before), 1 the target (128 where reached),
+    2 the suspended rod (:mod:`cnt_env.task.raster`).
 
     ## Rewards
 
-    Potential-based: each step pays the change in an agreement score Φ, so the return
-    of an episode is its final score (Φ = 0 at reset, nothing laid yet). With the
-    tolerance band τ_b = ``tolerance`` (L_vb) and only the trace laid since reset:
+    Potential-based: each step pays the change in a score Φ, so the return of an episode
+    is its final score (Φ = 0 at reset). Every term is in ``info`` as ``reward_<term>``
+    and ``reward == sum(info["reward_*"])``; ``info["score"]`` is Φ.
 
-    * coverage C: fraction of the target's arc length within τ_b of a trace node;
-    * precision P: fraction of the trace nodes within τ_b of the target (0 before any);
-    * progress G: arc length of the furthest covered target point over the target length;
+    Routes (:class:`~cnt_env.task.scoring.RouteScore`): G = furthest arc length reached by
+    trace inside the corridor / route length; P = pads crossed / pads; C = 1 once G = 1;
+    o = fraction of the episode's trace nodes outside the corridor; n_s = nodes in
+    keep-outs. A = (0.8 G + 0.2 P + 0.2 C) / (0.8 + 0.2 [pads] + 0.2),
+    Φ = A (1 - o)(1 - min(1, 0.05 n_s)) ∈ [0, 1]; terms ``progress``, ``pads``,
+    ``completion``, ``outside`` (-A o), ``short`` (-A (1 - o) min(1, 0.05 n_s)).
 
-    Φ = w_c C + w_p P + w_g G - penalty · [simulation failed], with the weights
-    ``coverage_weight`` (0.5), ``precision_weight`` (0.25), ``progress_weight`` (0.25)
-    and ``failure_penalty`` (1.0). Φ lies in [0, 1] without a failure. The reward is
-    ``reward_coverage + reward_precision + reward_progress + reward_failure``, each in
-    ``info``; ``info["score"]`` is Φ.
+    Thin (:class:`~cnt_env.task.scoring.ThinScore`): coverage C (target length within τ_b
+    of the trace), precision P (trace nodes within τ_b), progress G; Φ = w_c C + w_p P +
+    w_g G with ``coverage_weight``, ``precision_weight``, ``progress_weight``.
 
-    ``info`` also holds the raw metrics: ``coverage``, ``precision``, ``progress``,
-    ``mean_distance`` (mean distance of the episode's trace nodes to the target, L_vb;
-    0 before any), ``n_laid`` (nodes), ``laid_length`` (L_vb), ``sim_time`` (tau since
-    reset), ``flow_vbar``, ``flow_phi``, ``target``, ``target_length``, ``is_success``,
-    ``physics_steps``, ``newton_iterations``, and every ``pattern_every`` steps, at
-    termination and on the last step before the TimeLimit, ``info["pattern"]``: the
-    pattern measures of the episode's trace (:func:`cnt_env.patterns.measure`; NaN
-    where a measure does not apply).
+    A simulation failure adds ``reward_failure = -failure_penalty`` once.
+
+    ``info`` also holds ``coverage``, ``precision``, ``progress``, ``mean_distance``
+    (L_vb), ``n_laid``, ``laid_length``, ``sim_time``, ``flow_vbar``, ``flow_phi``,
+    ``target``, ``target_length``, ``is_success``, ``physics_steps``,
+    ``newton_iterations``; routes: ``inside``, ``outside``, ``shorts``, ``pads_crossed``,
+    ``n_pads``, ``completed``, ``route_width``, ``max_episode_steps``; and every
+    ``pattern_every`` steps and at the end, ``info["pattern"]`` (pattern measures,
+    :func:`cnt_env.patterns.measure`).
 
     ## Starting State
 
-    A warm state per configuration: the simulator after ``warmup_length`` L_vb of trace
-    laid from the start-up shape (default H̄, so the suspended rod no longer holds any
-    of the artificial initial shape) with the configured flow (``vbar``, ``phi``). It is
-    computed once, cached on disk (:mod:`cnt_env.sim.warmstart`; ``cache_dir``, or
-    ``$CNT_ENV_CACHE_DIR``, or the user cache directory) and restored exactly at every
-    reset. Then the simulator advances for a random time, uniform in
-    [0, ``reset_advance`` * ``control_interval``), with that flow, and the target (drawn
-    from the training ``families`` with ``np_random``, or given by
-    ``reset(options={"target": ...})``: a family name, a held-out name, a
-    :class:`~cnt_env.task.targets.Target`, or an (n, 2) polyline) is placed at the contact
-    point.
+    A warm state per configuration (the simulator after ``warmup_length`` L_vb of trace
+    with the configured flow ``vbar``, ``phi``), computed once, cached on disk
+    (``cache_dir``, ``$CNT_ENV_CACHE_DIR`` or the user cache) and restored exactly at every
+    reset; then a random advance in [0, ``reset_advance`` · ``control_interval``). The
+    target is placed at the contact point: drawn from ``families`` at ``difficulty`` with
+    ``np_random``, or ``reset(options={"target": ...})``: a family or held-out name, a
+    Route, a dict ``{"waypoints", "width", "pads", "keepouts", "name"}``, or an (n, 2)
+    polyline (corridor ``route_width``). A bad target (say zero length) raises
+    ``ValueError`` before anything changes.
 
     ## Episode End
 
-    ### Termination
-    1. The target is laid: its end point is within τ_b of the episode's trace
-       (``info["is_success"]``).
-    2. The simulation failed (the Newton solve failed even after halving dt):
-       ``reward_failure = -failure_penalty`` and ``info["failure"]`` holds the reason.
-       The observation stays finite; stepping again repeats the terminal step with
-       reward 0.
+    Termination: the route is completed (thin: the target's end is covered;
+    ``info["is_success"]``), or the simulation failed (``info["failure"]``; the
+    observation stays finite, stepping again repeats the terminal step with reward 0).
 
-    ### Truncation
-    By ``TimeLimit``: ``max_episode_steps`` = 400 when made with
-    ``gymnasium.make("CNTDeposit-v0")``: ~400 L_vb of trace, about 4 periods of the
-    baseline serpentine (~95 L_vb of trace per period).
+    Truncation: routes end after ``max_episode_steps`` (set at reset,
+    :meth:`episode_steps_for`): 1.5 · route length / (0.2 L_vb per L_vb · trace per
+    step) + 10, 158 steps for the 160 L_vb U-turn. ``gymnasium.make`` also wraps the env
+    in a ``TimeLimit`` of 400 steps (the thin task's ~400 L_vb).
 
     ## Arguments
 
     | Parameter          | Default      | Description                                     |
     |--------------------|--------------|-------------------------------------------------|
     | `render_mode`      | None         | "rgb_array" or "human"                          |
-    | `preset`           | "serpentine" | paper groups (units.paper_groups): or "coil"    |
+    | `preset`           | "serpentine" | paper groups (units.paper_groups) or "coil"     |
     | `substrate`        | preset's     | "stepped" or "flat" (flat: κ̄_c = None)          |
     | `Hbar`, `Ibar`     | preset's     | rod height (L_vb), mass per length              |
     | `kappa_c_bar`      | 0.2          | critical curvature (stepped only; 1/L_vb)       |
     | `delta_bar`        | 1.0          | discretisation length (L_vb)                    |
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
-    | `dt`               | 0.2 H̄        | physics time step (tau); stepped: ENV_SIM_DEFAULTS |
+    | `dt`               | 0.2 H̄ ...    | physics time step (tau); ENV_SIM_DEFAULTS       |
     | `coarse_delta`     | None         | graded discretisation (DepositionConfig)        |
-    | `initial_radius`   | preset's     | start-up arc radius (L_vb): 3.9 stepped, 6.4 flat |
+    | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "linear"     | "linear" or "printed"                           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
-    | `control_interval` | ~1.5 H̄       | simulated time per step (tau), whole dt's       |
+    | `control_interval` | 12 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
     | `warmup_length`    | H̄            | trace laid to reach the warm state (L_vb)       |
-    | `warmup_seed`      | 0            | seed of the start-up perturbation               |
+    | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
     | `reset_advance`    | 4.0          | max random advance at reset (control intervals) |
-    | `tolerance`        | 2.0          | tolerance band τ_b (L_vb)                       |
+    | `score`            | "corridor"   | "corridor" (routes) or "thin" (v0 polylines)    |
+    | `route_width`      | 15.0         | corridor half-width of bare polylines (L_vb)    |
+    | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]      |
+    | `families`         | all          | training families (routes.FAMILIES / targets)   |
+    | `trace_window`     | 64 / None    | span of the observed trace points (L_vb)        |
+    | `tolerance`        | 2.0          | thin: tolerance band τ_b (L_vb)                 |
     | `n_trace_points`   | 16           | K                                               |
     | `n_target_points`  | 16           | M                                               |
     | `target_spacing`   | 2.0          | spacing of the observed target points (L_vb)    |
-    | `coverage_weight`  | 0.5          | w_c                                             |
-    | `precision_weight` | 0.25         | w_p                                             |
-    | `progress_weight`  | 0.25         | w_g                                             |
+    | `coverage_weight`  | 0.5          | thin: w_c                                       |
+    | `precision_weight` | 0.25         | thin: w_p                                       |
+    | `progress_weight`  | 0.25         | thin: w_g                                       |
     | `failure_penalty`  | 1.0          | paid once on a simulation failure               |
-    | `families`         | all six      | training target families (targets.FAMILIES)     |
     | `obs_mode`         | "vector"     | "vector" or "image"                             |
     | `image_size`       | 64           | S of the image observation (>= 64 pixels)       |
     | `image_extent`     | 64.0         | side of the image observation (L_vb)            |
@@ -220,7 +244,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
-    * v0: initial version.
+    * v0, revision 2 (route task): ``score="corridor"`` by default: circuit routes with a
+      corridor, pads and keep-outs (docs/task.md), the corridor score, per-route
+      ``max_episode_steps`` and termination on completion, a control interval of 12 H̄
+      from the measured step response, the trace observed over its last 64 L_vb, the
+      corridor width observed. ``score="thin"`` is the v0 task unchanged.
+    * v0: initial version (thin polylines, ~1 L_vb per step).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
@@ -257,6 +286,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         progress_weight: float = 0.25,
         failure_penalty: float = 1.0,
         families: Sequence[str] | str | None = None,
+        score: str = "corridor",
+        route_width: float = DEFAULT_HALF_WIDTH,
+        difficulty: float = routes.DEFAULT_DIFFICULTY,
+        trace_window: float | None = None,
         obs_mode: str = "vector",
         image_size: int = 64,
         image_extent: float = 64.0,
@@ -279,6 +312,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.params.vbar > self.vbar_max:
             raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max = {self.vbar_max}")
         self.dt = self.config.time_step
+        self.score_mode = s.choice("score", score, SCORES)
         self.control_interval, self.n_substeps = self._substeps(control_interval)
         self.warmup_length = s.non_negative(
             "warmup_length", self.params.Hbar if warmup_length is None else warmup_length
@@ -293,7 +327,22 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self.weights.sum() > 0:
             raise ValueError("at least one reward weight must be > 0")
         self.failure_penalty = s.non_negative("failure_penalty", failure_penalty)
-        self.families = s.families_tuple(families, targets_mod.FAMILIES)
+        known = routes.FAMILIES if self.score_mode == "corridor" else targets_mod.FAMILIES
+        self.families = s.families_tuple(families, known)
+        self.route_width = s.positive("route_width", route_width)
+        if self.route_width < routes.MIN_HALF_WIDTH:
+            raise ValueError(f"route_width must be >= {routes.MIN_HALF_WIDTH} L_vb")
+        self.difficulty = s.non_negative("difficulty", difficulty)
+        if self.difficulty > 1.0:
+            raise ValueError(f"difficulty must be in [0, 1], got {difficulty!r}")
+        if trace_window is None and self.score_mode == "corridor":
+            trace_window = ROUTE_TRACE_WINDOW
+        self.trace_window = None if trace_window is None else s.positive("trace_window",
+                                                                         trace_window)  # fmt: skip
+        self._reward_keys = _REWARD_KEYS[self.score_mode]
+        #: Episode length (control steps) of the current route (score="corridor"; set at
+        #: reset from the route's length); None in the thin task (the TimeLimit's).
+        self.max_episode_steps: int | None = None
         self.obs_mode = s.choice("obs_mode", obs_mode, OBS_MODES)
         self.image_size = s.count("image_size", image_size, minimum=64)
         self.image_extent = s.positive("image_extent", image_extent)
@@ -302,9 +351,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.cache_dir = s.optional_path("cache_dir", cache_dir)
         self.lean_heights = LEAN_HEIGHTS + tuple(f * self.params.Hbar
                                                  for f in LEAN_HEIGHT_FRACTIONS)  # fmt: skip
-        self.layout = ObservationLayout(s.count("n_trace_points", n_trace_points),
-                                        s.count("n_target_points", n_target_points),
-                                        self.lean_heights)  # fmt: skip
+        self.layout = ObservationLayout(
+            s.count("n_trace_points", n_trace_points), s.count("n_target_points", n_target_points),
+            self.lean_heights, route=self.score_mode == "corridor",
+        )  # fmt: skip
         self.n_trace_points = self.layout.n_trace_points
         self.n_target_points = self.layout.n_target_points
         self.observation_structure: dict[str, int] = dict(self.layout.structure)
@@ -325,7 +375,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         """The control interval (tau) and its whole number of physics steps
         (docs/architecture.md rule 4)."""
         if control_interval is None:
-            n = max(1, round(CONTROL_INTERVAL_HBAR * self.params.Hbar / self.dt))
+            n = max(1, round(CONTROL_INTERVAL_HBAR[self.score_mode] * self.params.Hbar / self.dt))
             control_interval = n * self.dt
         interval = settings.positive("control_interval", control_interval)
         n = round(interval / self.dt)
@@ -365,11 +415,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         target_spec = options.pop("target", None)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}; only 'target' is known")
-        rng = self.np_random
-        if target_spec is None:
-            target = targets_mod.sample(rng, self.families)
-        else:
-            target = targets_mod.resolve(target_spec, rng)
+        target = self._resolve_target(target_spec)  # before any state changes
         if self._warm is None:
             snap, self.warm_start_source = warm_state(
                 self.config, self.warmup_length, self.warmup_seed, self.cache_dir
@@ -378,7 +424,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             self._sim = DepositionSim(self.config, seed=self.warmup_seed)
         sim = self._sim
         assert sim is not None
-        advance = float(rng.uniform(0.0, 1.0)) * self.reset_advance * self.control_interval
+        advance = (
+            float(self.np_random.uniform(0.0, 1.0)) * self.reset_advance * self.control_interval
+        )
         sim.restore(unflatten_snapshot(self._warm))
         if advance > 0.0:
             try:
@@ -392,13 +440,32 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         metrics = self._last_metrics = self._metrics(trace)
         self._potentials = self._score.potentials(metrics)
         obs = self._observation(trace, metrics)
-        info = self._info(metrics, dict.fromkeys(_REWARD_KEYS, 0.0), 0, 0)
+        info = self._info(metrics, dict.fromkeys(self._reward_keys, 0.0), 0, 0)
         info["reset_advance"] = advance
         if self.render_mode == "human":
             self.render()
         return obs, info
 
-    def _begin_episode(self, target: Target) -> None:
+    def episode_steps_for(self, route: Route) -> int:
+        """Episode length (control steps) of ``route``: ``ROUTE_STEPS_SLACK`` times the
+        steps its length needs at the measured progress rate, plus a margin."""
+        laid_per_step = DEPOSITION_SPEED * self.control_interval / self.params.Hbar
+        need = route.length / (PROGRESS_RATE * laid_per_step)
+        return math.ceil(ROUTE_STEPS_SLACK * need) + ROUTE_STEPS_MARGIN
+
+    def _resolve_target(self, spec: Any) -> Route | targets_mod.Target:
+        """The episode's target: drawn from ``families`` (spec None) or ``spec``
+        (routes.resolve / targets.resolve). Raises ValueError on a bad spec."""
+        rng = self.np_random
+        if self.score_mode == "thin":
+            if spec is None:
+                return targets_mod.sample(rng, self.families)
+            return targets_mod.resolve(spec, rng)
+        if spec is None:
+            return routes.sample(rng, self.families, self.difficulty)
+        return routes.resolve(spec, rng, self.difficulty, self.route_width)
+
+    def _begin_episode(self, target: Route | targets_mod.Target) -> None:
         sim = self._sim
         trace = sim.trace()
         self._n0 = sim.n_trace
@@ -407,7 +474,14 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._t0 = float(sim.time)
         self.target = target
         self._target_abs = target.points + self._origin
-        self._score = ThinScore(self._target_abs, self.tolerance, self.weights)
+        if isinstance(target, Route):
+            _, pads, keepouts = target.translated(self._origin)
+            self._pads_abs, self._keepouts_abs = pads, keepouts
+            self._score = RouteScore(self._target_abs, target.width, pads, keepouts)
+            self.max_episode_steps = self.episode_steps_for(target)
+        else:
+            self._pads_abs, self._keepouts_abs = np.zeros((0, 2, 2)), ()
+            self._score = ThinScore(self._target_abs, self.tolerance, self.weights)
         self._target_s = targets_mod.cumulative_length(self._target_abs)
         self._target_length = float(self._target_s[-1])
         self._steps = 0
@@ -426,7 +500,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._failure is not None:  # stepping past a failure repeats the terminal step
             trace = sim.trace()
             metrics = self._metrics(trace)
-            info = self._info(metrics, dict.fromkeys(_REWARD_KEYS, 0.0), 0, 0)
+            info = self._info(metrics, dict.fromkeys(self._reward_keys, 0.0), 0, 0)
             info["failure"] = self._failure
             return self._observation(trace, metrics), 0.0, True, False, info
         self._flow = flow_from_action(np.clip(a, -1.0, 1.0), self.vbar_max)
@@ -451,12 +525,15 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             potentials = self._potentials  # a failed state scores nothing new
         delta = potentials - self._potentials
         self._potentials = potentials
-        terms = dict(zip(_REWARD_KEYS[:-1], (float(d) for d in delta), strict=True))
+        keys = self._reward_keys
+        terms = dict(zip(keys[:-1], (float(d) for d in delta), strict=True))
         terms["reward_failure"] = -self.failure_penalty if self._failure is not None else 0.0
         reward = 0.0
-        for key in _REWARD_KEYS:
+        for key in keys:
             reward += terms[key]
-        terminated = bool(metrics["covered_end"]) or self._failure is not None
+        terminated = self._done(metrics) or self._failure is not None
+        truncated = (not terminated and self.max_episode_steps is not None
+                     and self._steps >= self.max_episode_steps)  # fmt: skip
         info = self._info(metrics, terms, after["steps"] - before["steps"],
                           after["newton_iterations"] - before["newton_iterations"])  # fmt: skip
         if self._failure is not None:
@@ -466,13 +543,18 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             terminated
             or (self.pattern_every and self._steps % self.pattern_every == 0)
             or (limit is not None and self._steps == limit)
+            or truncated
         ):
             pattern = self._pattern(trace)
             if pattern is not None:
                 info["pattern"] = pattern
         if self.render_mode == "human":
             self.render()
-        return obs, reward, terminated, False, info
+        return obs, reward, terminated, truncated, info
+
+    def _done(self, metrics: dict[str, Any]) -> bool:
+        """The target is laid: the route completed, or the thin target's end covered."""
+        return bool(metrics["completed" if self.score_mode == "corridor" else "covered_end"])
 
     # ---- scoring (task/scoring.py) -------------------------------------------------------
     def _metrics(self, trace: np.ndarray) -> dict[str, Any]:
@@ -502,10 +584,15 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             flow_phi=float(self._flow[1]),
             target=self.target.name,
             target_length=self._target_length,
-            is_success=bool(metrics["covered_end"]) and self._failure is None,
+            is_success=self._done(metrics) and self._failure is None,
             physics_steps=int(physics_steps),
             newton_iterations=int(newton_iterations),
         )
+        if self.score_mode == "corridor":
+            for k in ("inside", "outside", "shorts", "pads_crossed", "n_pads", "completed"):
+                info[k] = metrics[k]
+            info["route_width"] = self.target.width
+            info["max_episode_steps"] = self.max_episode_steps
         return info
 
     def _pattern(self, trace: np.ndarray) -> dict[str, Any] | None:
@@ -535,7 +622,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         rod = rod_features(sim.suspended_nodes, trace[-1], self.lean_heights)
         laid_ratio = (float(sim.deposited_length) - self._laid0) / self._target_length
         progress = [metrics["progress"], metrics["coverage"], metrics["precision"], laid_ratio]
-        return self.layout.build(trace, ahead, flow, rod, np.array(progress))
+        route = None
+        if self.score_mode == "corridor":
+            keep = nearest_on_polygons(trace[-1, [0, 2]], self._keepouts_abs)
+            route = np.array([self.target.width, *keep])
+        return self.layout.build(trace, ahead, flow, rod, np.array(progress), self.trace_window,
+                                 route)  # fmt: skip
 
     def _target_done(self, metrics: dict[str, Any]) -> np.ndarray | None:
         """The target up to its furthest covered point (None before any)."""
@@ -553,12 +645,18 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             frame = raster.top_view(
                 self.render_size, self._sim.trace()[:, [0, 2]], self._n0, self._target_abs,
                 self._target_done(self._last_metrics), self._sim.suspended_nodes[:, [0, 2]],
-                self._flow, self.vbar_max, 4.0 * self.tolerance,
+                self._flow, self.vbar_max, 4.0 * self.tolerance, self._route_overlays(),
             )  # fmt: skip
         if self.render_mode == "rgb_array":
             return frame
         self._window.show(frame)
         return None
+
+    def _route_overlays(self) -> raster.Extra:
+        """Pads (dark yellow) and keep-outs (orange, closed) for the rendered frame."""
+        pads = tuple((p, (200, 160, 0)) for p in self._pads_abs)
+        keep = tuple((np.concatenate([k, k[:1]]), (240, 120, 0)) for k in self._keepouts_abs)
+        return pads + keep
 
     def close(self) -> None:
         self._window.close()

@@ -1,5 +1,10 @@
-"""The agreement score Φ of a trace against a target: one implementation, incremental for
-the env and batch for the constant-flow search (``policies/constant.py``).
+"""The agreement score Φ of a trace against a target: one implementation per task mode,
+incremental for the env and batch for the constant-flow search (``policies/constant.py``).
+
+Two modes: ``"corridor"`` (:class:`RouteScore`, the default of the route task: progress
+inside a corridor, pads, completion, no shorts) and ``"thin"`` (:class:`ThinScore`, the v0
+task: agreement with a thin polyline). Both have ``update(trace, n_frozen) -> metrics`` and
+``potentials(metrics) -> terms``, whose sum is Φ.
 
 Thin-polyline score (``score="thin"``, the v0 task; docs/task.md). With the tolerance band
 τ_b (L_vb) and the trace laid since reset:
@@ -22,16 +27,21 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from cnt_env.task import targets as targets_mod
 
 __all__ = [
     "COVERAGE_SPACING",
+    "ROUTE_TERMS",
+    "ROUTE_WEIGHTS",
     "THIN_TERMS",
     "THIN_WEIGHTS",
+    "RouteScore",
     "ThinScore",
     "covered",
     "distances",
+    "score_route_trace",
     "score_trace",
 ]
 
@@ -144,3 +154,219 @@ def score_trace(
     out = {k: float(m[k]) for k in THIN_TERMS}
     out["score"] = float(np.sum(score.potentials(m)))
     return {"score": out["score"], **{k: out[k] for k in THIN_TERMS}}
+
+
+# ---- the corridor score of a route (score="corridor", docs/task.md) ---------------------
+
+#: Terms of the corridor score; the reward pays the change of each (``reward_<term>``).
+ROUTE_TERMS = ("progress", "pads", "completion", "outside", "short")
+#: Default weights of the positive terms (progress, pads, completion), normalised over
+#: the terms a route has (no pads: progress and completion only).
+ROUTE_WEIGHTS = (0.8, 0.2, 0.2)
+#: Share of the score one trace node (~1 L_vb) inside a keep-out costs: 20 L_vb of trace
+#: in a keep-out (a short circuit) zero the score.
+SHORT_PENALTY = 0.05
+#: Largest step (in corridor half-widths) the progress may take from one trace node to the
+#: next: a node projects onto the route within this arc length ahead of the furthest point
+#: reached, so a fold of the route cannot be skipped through where its corridors overlap.
+PROGRESS_JUMP_WIDTHS = 2.0
+
+
+@njit(cache=True)
+def _walk(points, verts, cum_s, width, jump, furthest):  # pragma: no cover - numba
+    """Furthest arc length reached, walking ``points`` (p, 2) in order from ``furthest``:
+    each point inside the corridor projects onto the route within ``jump`` ahead."""
+    w2 = width * width
+    for i in range(points.shape[0]):
+        px, pz = points[i, 0], points[i, 1]
+        limit = furthest + jump
+        best, best_s = np.inf, 0.0
+        for j in range(verts.shape[0] - 1):
+            if cum_s[j] > limit:
+                break
+            ax, az = verts[j, 0], verts[j, 1]
+            dx, dz = verts[j + 1, 0] - ax, verts[j + 1, 1] - az
+            len2 = dx * dx + dz * dz
+            t = ((px - ax) * dx + (pz - az) * dz) / len2 if len2 > 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            s = cum_s[j] + t * (cum_s[j + 1] - cum_s[j])
+            if s > limit:
+                t = (limit - cum_s[j]) / (cum_s[j + 1] - cum_s[j])
+                s = limit
+            ex, ez = px - ax - t * dx, pz - az - t * dz
+            d2 = ex * ex + ez * ez
+            if d2 < best:
+                best, best_s = d2, s
+        if best <= w2 and best_s > furthest:
+            furthest = best_s
+    return furthest
+
+
+@njit(cache=True)
+def _count_in_polygons(points, polys, starts):  # pragma: no cover - numba
+    """Number of ``points`` inside any of the polygons (vertices ``polys``, polygon k
+    from ``starts[k]`` to ``starts[k + 1]``), by the even-odd rule."""
+    n = 0
+    for i in range(points.shape[0]):
+        px, pz = points[i, 0], points[i, 1]
+        for k in range(starts.shape[0] - 1):
+            a, b = starts[k], starts[k + 1]
+            inside = False
+            for j in range(a, b):
+                jj = j + 1 if j + 1 < b else a
+                x0, z0, x1, z1 = polys[j, 0], polys[j, 1], polys[jj, 0], polys[jj, 1]
+                if (z0 > pz) != (z1 > pz) and px < x0 + (pz - z0) * (x1 - x0) / (z1 - z0):
+                    inside = not inside
+            if inside:
+                n += 1
+                break
+    return n
+
+
+@njit(cache=True)
+def _mark_crossed(points, pads, hit):  # pragma: no cover - numba
+    """Set ``hit[k]`` where the polyline ``points`` crosses pad segment k (pads (p, 2, 2))."""
+    for k in range(pads.shape[0]):
+        if hit[k]:
+            continue
+        ax, az = pads[k, 0, 0], pads[k, 0, 1]
+        bx, bz = pads[k, 1, 0], pads[k, 1, 1]
+        for i in range(points.shape[0] - 1):
+            cx, cz = points[i, 0], points[i, 1]
+            dx, dz = points[i + 1, 0], points[i + 1, 1]
+            d1 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax)
+            d2 = (bx - ax) * (dz - az) - (bz - az) * (dx - ax)
+            d3 = (dx - cx) * (az - cz) - (dz - cz) * (ax - cx)
+            d4 = (dx - cx) * (bz - cz) - (dz - cz) * (bx - cx)
+            if d1 * d2 <= 0.0 and d3 * d4 <= 0.0 and (d1 != d2) and (d3 != d4):
+                hit[k] = True
+                break
+
+
+class RouteScore:
+    """The corridor score of one episode against a route (docs/task.md), updated as the
+    trace grows (the same ``update(trace, n_frozen)`` as :class:`ThinScore`).
+
+    With G the progress (furthest arc length reached by trace inside the corridor, over
+    the route length), P the fraction of pads crossed, C = 1 once G = 1, o the fraction of
+    trace nodes outside the corridor and n_s the nodes inside keep-outs:
+
+        A = (w_g G + w_p P + w_c C) / (w_g + w_p [pads] + w_c),
+        k = min(1, SHORT_PENALTY n_s) (0.05 per node),
+        Φ = A (1 - o) (1 - k)  in [0, 1],
+
+    split into the terms progress w_g G / W, pads w_p P / W, completion w_c C / W,
+    outside -A o and short -A (1 - o) k, which sum to Φ."""
+
+    def __init__(self, waypoints: np.ndarray, width: float, pads: np.ndarray,
+                 keepouts: Sequence[np.ndarray],
+                 weights: Sequence[float] = ROUTE_WEIGHTS) -> None:  # fmt: skip
+        self.waypoints = np.ascontiguousarray(waypoints, dtype=np.float64)
+        self.width = float(width)
+        self.cum_s = targets_mod.cumulative_length(self.waypoints)
+        self.length = float(self.cum_s[-1])
+        self.jump = PROGRESS_JUMP_WIDTHS * self.width
+        self.pads = np.ascontiguousarray(np.reshape(pads, (-1, 2, 2)), dtype=np.float64)
+        polys = [np.asarray(k, dtype=np.float64) for k in keepouts]
+        self.keep_vertices = np.ascontiguousarray(
+            np.concatenate(polys) if polys else np.zeros((0, 2))
+        )
+        self.keep_starts = np.concatenate([[0], np.cumsum([len(k) for k in polys])]).astype(
+            np.int64
+        )
+        wg, wp, wc = (float(x) for x in weights)
+        self.weights = np.array([wg, wp if len(self.pads) else 0.0, wc])
+        self.samples, self.sample_s = targets_mod.resample(self.waypoints, COVERAGE_SPACING)
+        self.sample_w = arc_weights(self.sample_s)
+        self._frozen_upto = 0
+        self._furthest = 0.0
+        self._n_in = 0
+        self._n_short = 0
+        self._dist_sum = 0.0
+        self._pads_hit = np.zeros(len(self.pads), dtype=np.bool_)
+        self._cov = np.zeros(len(self.sample_s), dtype=np.bool_)
+
+    def _scan(self, pts: np.ndarray, joint: np.ndarray, furthest: float,
+              pads_hit: np.ndarray, cov: np.ndarray) -> tuple[float, int, int, float]:  # fmt: skip
+        """Walk ``pts`` on from the state given (``pads_hit`` and ``cov`` updated in
+        place); ``joint``: the node before them (0 or 1 rows), for the pad crossings."""
+        furthest = _walk(pts, self.waypoints, self.cum_s, self.width, self.jump, furthest)
+        d = distances(pts, self.waypoints)
+        n_in = int(np.count_nonzero(d <= self.width))
+        n_short = (_count_in_polygons(pts, self.keep_vertices, self.keep_starts)
+                   if len(self.keep_starts) > 1 else 0)  # fmt: skip
+        if len(self.pads):
+            _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit)
+        cov |= covered(self.samples, pts, self.width)
+        return furthest, n_in, n_short, float(d.sum())
+
+    def update(self, trace: np.ndarray, n_frozen: int) -> dict[str, Any]:
+        """Metrics of the episode's ``trace`` (n, 2), whose first ``n_frozen`` nodes never
+        move again: ``progress``, ``furthest`` (L_vb), ``pads_crossed``, ``completed``,
+        ``inside`` (fraction of nodes in the corridor; also as ``precision``),
+        ``outside``, ``shorts`` (nodes in keep-outs), ``coverage`` (fraction of the
+        route's length with trace within w), ``mean_distance`` and ``n_laid``."""
+        trace = np.ascontiguousarray(trace, dtype=np.float64)
+        frozen_end = max(0, min(len(trace), n_frozen))
+        if frozen_end > self._frozen_upto:
+            a = self._frozen_upto
+            f, n_in, n_s, dsum = self._scan(trace[a:frozen_end], trace[max(0, a - 1) : a],
+                                            self._furthest, self._pads_hit, self._cov)  # fmt: skip
+            self._furthest, self._frozen_upto = f, frozen_end
+            self._n_in += n_in
+            self._n_short += n_s
+            self._dist_sum += dsum
+        pads_hit, cov = self._pads_hit.copy(), self._cov.copy()
+        a = frozen_end
+        f, n_in, n_s, dsum = self._scan(trace[a:], trace[max(0, a - 1) : a], self._furthest,
+                                        pads_hit, cov)  # fmt: skip
+        n_laid = len(trace)
+        n_in += self._n_in
+        n_short = n_s + self._n_short
+        inside = n_in / n_laid if n_laid else 0.0
+        return {
+            "progress": min(1.0, f / self.length),
+            "furthest": f,
+            "pads_crossed": int(np.count_nonzero(pads_hit)),
+            "n_pads": len(self.pads),
+            "completed": bool(f >= self.length * (1.0 - 1e-12)),
+            "inside": inside,
+            "precision": inside,
+            "outside": (n_laid - n_in) / n_laid if n_laid else 0.0,
+            "shorts": n_short,
+            "coverage": float(np.dot(self.sample_w, cov)),
+            "mean_distance": (self._dist_sum + dsum) / n_laid if n_laid else 0.0,
+            "n_laid": n_laid,
+        }
+
+    def potentials(self, metrics: dict[str, Any]) -> np.ndarray:
+        """The terms of Φ in the order of :data:`ROUTE_TERMS`; Φ is their sum."""
+        w = self.weights / self.weights.sum()
+        pads = metrics["pads_crossed"] / metrics["n_pads"] if metrics["n_pads"] else 0.0
+        pos = w * np.array([metrics["progress"], pads, float(metrics["completed"])])
+        a = float(pos.sum())
+        o = metrics["outside"]
+        k = min(1.0, SHORT_PENALTY * metrics["shorts"])
+        return np.array([pos[0], pos[1], pos[2], -a * o, -a * (1.0 - o) * k])
+
+
+def score_route_trace(trace: np.ndarray, route: Any,
+                      n_after_step: np.ndarray | None = None) -> dict[str, float]:  # fmt: skip
+    """Batch corridor Φ of a whole ``trace`` (n, 2) against ``route`` (a
+    :class:`~cnt_env.task.routes.Route`), both relative to the contact point at reset.
+    With ``n_after_step`` (nodes laid after each control step, as many steps as the
+    episode may take) the trace is cut at the first step that completes the route, where
+    the env would have terminated."""
+    pts = np.ascontiguousarray(trace, dtype=np.float64)
+    cuts = [len(pts)] if n_after_step is None else [int(n) for n in n_after_step]
+    score = RouteScore(route.waypoints, route.width, route.pads, route.keepouts)
+    done = 0
+    for n in cuts:  # frozen up to the previous cut: the walk is incremental
+        m = score.update(pts[:n], done)
+        done = n
+        if m["completed"]:
+            break
+    out = {k: float(m[k]) for k in ("progress", "coverage", "precision", "inside", "shorts")}
+    out["completed"] = float(m["completed"])
+    out["score"] = float(np.sum(score.potentials(m)))
+    return out

@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 __all__ = [
+    "FAR",
     "LAID_RATIO_BOUND",
     "LEAN_HEIGHTS",
     "LEAN_HEIGHT_FRACTIONS",
@@ -25,11 +26,15 @@ __all__ = [
     "ObservationLayout",
     "action_from_flow",
     "flow_from_action",
+    "nearest_on_polygons",
     "rod_features",
+    "trace_points",
 ]
 
 #: Bound (L_vb) of every position in the vector observation; values are clipped to it.
 POSITION_BOUND = 1000.0
+#: Offset observed for "no keep-out" (clipped to POSITION_BOUND in the observation).
+FAR = 1.0e6
 #: Bound of the laid-length / target-length ratio in the observation.
 LAID_RATIO_BOUND = 100.0
 #: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
@@ -100,14 +105,43 @@ def rod_features(nodes: np.ndarray, contact3: np.ndarray,
     return out
 
 
+def trace_points(xz: np.ndarray, k: int, window: float) -> np.ndarray:
+    """K points (k, 2) evenly spaced in arc length over the last ``window`` L_vb of the
+    trace ``xz`` (n, 2), oldest first, the last one ``window / k`` before its end (the
+    start of the trace repeats where it is shorter)."""
+    # not patterns.arc_length: that one rejects the non-finite state of a failed step
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xz, axis=0).T))])
+    at = s[-1] - window * (np.arange(k, 0, -1) / k)
+    return np.column_stack([np.interp(at, s, xz[:, c]) for c in (0, 1)])
+
+
+def nearest_on_polygons(point: np.ndarray, polygons: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The point of the polygons' boundaries nearest ``point`` (2,); ``point`` + FAR when
+    there is none."""
+    best, best_d = point + FAR, np.inf
+    for poly in polygons:
+        a = poly
+        b = np.roll(poly, -1, axis=0)
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+        q = a + t[:, None] * ab
+        d = np.hypot(*(q - point).T)
+        i = int(np.argmin(d))
+        if d[i] < best_d:
+            best, best_d = q[i], d[i]
+    return best
+
+
 @dataclass(frozen=True, eq=False)
 class ObservationLayout:
     """The flat vector observation: K trace points, M target points, the flow, the rod
-    features at ``lean_heights`` and four progress values."""
+    features at ``lean_heights``, four progress values and, with ``route``, the corridor's
+    half-width and the nearest keep-out point."""
 
     n_trace_points: int
     n_target_points: int
     lean_heights: tuple[float, ...]
+    route: bool = False
     structure: dict[str, int] = field(init=False)
     slices: dict[str, slice] = field(init=False)
     low: np.ndarray = field(init=False, repr=False)
@@ -117,6 +151,9 @@ class ObservationLayout:
         k, m = self.n_trace_points, self.n_target_points
         structure = {"trace": 2 * k, "target": 2 * m, "flow": 2,
                      "rod": 3 + 2 * len(self.lean_heights), "progress": 4}  # fmt: skip
+        if self.route:
+            # the corridor's half-width w, and the nearest keep-out point (x, z) (L_vb)
+            structure["route"] = 3
         slices, start = {}, 0
         for name, size in structure.items():
             slices[name] = slice(start, start + size)
@@ -143,25 +180,39 @@ class ObservationLayout:
         low[prog] = 0.0
         high[prog.start : prog.start + 3] = 1.0
         high[prog.start + 3] = LAID_RATIO_BOUND
+        if self.route:
+            low[sl["route"].start] = 0.0
         return low, high
 
     def space(self) -> spaces.Box:
         return spaces.Box(self.low, self.high, dtype=np.float32)
 
     def build(self, trace: np.ndarray, ahead: np.ndarray, flow_xz: np.ndarray,
-              rod: np.ndarray, progress: np.ndarray) -> np.ndarray:  # fmt: skip
+              rod: np.ndarray, progress: np.ndarray, trace_window: float | None = None,
+              route: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """The observation from ``trace`` (n, 3) (the last node is the contact point),
         the M target points ``ahead`` (M, 2) absolute, the flow over v̄_max (2,), the
-        :func:`rod_features` and the four progress values; clipped to the bounds."""
+        :func:`rod_features`, the four progress values and, with a route, ``route`` =
+        (w, x, z of the nearest keep-out point, absolute); clipped to the bounds.
+
+        The K trace points: with ``trace_window`` None the last K nodes before the contact
+        point (padded with the oldest while shorter); else K points evenly spaced in arc
+        length over the last ``trace_window`` L_vb of trace, ending one spacing before the
+        contact point (their mean is the pattern's centre)."""
         contact = trace[-1, [0, 2]]
         k = self.n_trace_points
-        past = trace[max(0, len(trace) - 1 - k) : len(trace) - 1][:, [0, 2]] - contact
-        if len(past) == 0:
-            past = np.zeros((1, 2))
-        if len(past) < k:
-            past = np.concatenate([np.repeat(past[:1], k - len(past), axis=0), past])
-        obs = np.concatenate([past.ravel(), (ahead - contact).ravel(), flow_xz, rod, progress])
-        return self.clip(obs)
+        if trace_window is None:
+            past = trace[max(0, len(trace) - 1 - k) : len(trace) - 1][:, [0, 2]] - contact
+            if len(past) == 0:
+                past = np.zeros((1, 2))
+            if len(past) < k:
+                past = np.concatenate([np.repeat(past[:1], k - len(past), axis=0), past])
+        else:
+            past = trace_points(trace[:, [0, 2]], k, trace_window) - contact
+        parts = [past.ravel(), (ahead - contact).ravel(), flow_xz, rod, progress]
+        if self.route:
+            parts.append(np.asarray(route, dtype=float) - [0.0, *contact])
+        return self.clip(np.concatenate(parts))
 
     def clip(self, obs: np.ndarray) -> np.ndarray:
         """``obs`` clipped to the bounds, as float32."""

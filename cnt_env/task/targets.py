@@ -56,12 +56,14 @@ __all__ = [
     "cumulative_length",
     "draw",
     "held_out",
+    "legs_points",
     "mark_covered",
     "polyline_distances",
     "polyline_length",
     "resample",
     "resolve",
     "sample",
+    "validated_polyline",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -70,6 +72,9 @@ FloatArray = NDArray[np.float64]
 CURVE_SPACING = 0.5
 #: Longest target accepted (L_vb); longer explicit polylines are rejected.
 MAX_TARGET_LENGTH = 1.0e4
+#: Shortest target accepted (L_vb): a degenerate one (say [[0, 0], [1e-300, 0]]) cannot
+#: be scored. Routes ask for more (routes.MIN_ROUTE_LENGTH).
+MIN_TARGET_LENGTH = 1.0e-6
 
 # Parameter ranges of the training families (uniform draws; lengths in L_vb).
 STRAIGHT_LENGTH_RANGE = (30.0, 120.0)
@@ -101,7 +106,7 @@ class Target:
     params: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        pts = _validated(self.points)
+        pts = validated_polyline(self.points)
         if not np.array_equal(pts[0], np.zeros(2)):
             raise ValueError(f"a target starts at the origin, got points[0] = {pts[0].tolist()}")
         pts.setflags(write=False)
@@ -117,7 +122,7 @@ class Target:
 # --------------------------------------------------------------------------- geometry
 
 
-def _validated(points: ArrayLike) -> FloatArray:
+def validated_polyline(points: ArrayLike) -> FloatArray:
     """(n, 2) finite float64 copy with zero-length segments removed; raises ValueError."""
     try:
         pts = np.array(points, dtype=np.float64)
@@ -135,6 +140,10 @@ def _validated(points: ArrayLike) -> FloatArray:
     if pts.shape[0] < 2:
         raise ValueError("a target polyline must have non-zero length")
     length = polyline_length(pts)
+    if not length >= MIN_TARGET_LENGTH:
+        raise ValueError(
+            f"target length {length:.6g} L_vb is below MIN_TARGET_LENGTH = {MIN_TARGET_LENGTH:g}"
+        )
     if length > MAX_TARGET_LENGTH:
         raise ValueError(
             f"target length {length:.6g} L_vb exceeds MAX_TARGET_LENGTH = {MAX_TARGET_LENGTH:g}"
@@ -223,7 +232,7 @@ def _arc(start: FloatArray, heading: float, radius: float, sweep: float) -> Floa
     return centre + radius * np.column_stack([np.cos(angles), np.sin(angles)])
 
 
-def _legs(lengths: ArrayLike, headings: ArrayLike) -> FloatArray:
+def legs_points(lengths: ArrayLike, headings: ArrayLike) -> FloatArray:
     """Polyline from the origin with straight legs of the given lengths and headings."""
     steps = np.column_stack([np.cos(headings), np.sin(headings)]) * np.asarray(lengths)[:, None]
     return np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
@@ -233,11 +242,11 @@ def _legs(lengths: ArrayLike, headings: ArrayLike) -> FloatArray:
 
 
 def straight_points(length: float, heading: float) -> FloatArray:
-    return _legs([length], [heading])
+    return legs_points([length], [heading])
 
 
 def l_bend_points(leg1: float, leg2: float, turn: float, heading: float) -> FloatArray:
-    return _legs([leg1, leg2], [heading, heading + turn])
+    return legs_points([leg1, leg2], [heading, heading + turn])
 
 
 def arc_points(radius: float, sweep: float, heading: float) -> FloatArray:
@@ -247,7 +256,7 @@ def arc_points(radius: float, sweep: float, heading: float) -> FloatArray:
 def zigzag_points(leg: float, turn: float, n_legs: int, heading: float) -> FloatArray:
     # the first leg leaves at heading - turn/2 so that the zig-zag progresses along heading
     signs = np.where(np.arange(n_legs) % 2 == 0, -0.5, 0.5)
-    return _legs(np.full(n_legs, leg), heading + signs * turn)
+    return legs_points(np.full(n_legs, leg), heading + signs * turn)
 
 
 def serpentine_points(
@@ -294,7 +303,7 @@ def smooth_points(
     ds = length / n
     theta = heading + np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)])
     mid = 0.5 * (theta[1:] + theta[:-1])
-    return _legs(np.full(n, ds), mid)
+    return legs_points(np.full(n, ds), mid)
 
 
 # --------------------------------------------------------------------------- families
@@ -415,7 +424,7 @@ def _square_wave() -> FloatArray:
     for _ in range(3):
         legs += [10.0, 20.0, 10.0, 20.0]
         headings += [0.0, math.pi / 2, 0.0, -math.pi / 2]
-    return _legs(np.array(legs), np.array(headings))
+    return legs_points(np.array(legs), np.array(headings))
 
 
 def _spiral() -> FloatArray:
@@ -430,7 +439,7 @@ def _spiral() -> FloatArray:
 
 
 def _jog() -> FloatArray:
-    return _legs(np.array([30.0, 15.0 * math.sqrt(2.0), 30.0]),
+    return legs_points(np.array([30.0, 15.0 * math.sqrt(2.0), 30.0]),
                  np.array([0.0, math.pi / 4, 0.0]))  # fmt: skip
 
 
@@ -483,5 +492,5 @@ def resolve(spec: Any, rng: np.random.Generator) -> Target:
             f"unknown target {spec!r}: a family {sorted(FAMILIES)}, a held-out target "
             f"{list(HELD_OUT)}, or an (n, 2) polyline"
         )
-    pts = _validated(spec)
+    pts = validated_polyline(spec)
     return Target("custom", pts - pts[0])

@@ -1,0 +1,403 @@
+"""Circuit routes for ``CNTDeposit-v1`` task mode ``score="corridor"`` (docs/task.md).
+
+A :class:`Route` is how a CNT interconnect is specified and what the flow can draw: a
+polyline of waypoints in the substrate plane (x, z) in L_vb, starting at the origin (the
+env places it at the contact point at reset), a corridor of half-width ``width`` around
+it, optional ``pads`` (segments the trace must cross, like electrodes) and optional
+``keepouts`` (polygons the trace must not enter, like a neighbouring wire).
+
+The corridor's default half-width, :data:`DEFAULT_HALF_WIDTH`, comes from the measured
+band widths (``benchmarks/results/step_response.json``): a constant flow across the steps
+lays a serpentine band 27 L_vb peak-to-peak at v̄ = 0.13, 33 at 0.1 and 41 at 0.065; along
+the steps an almost straight run. A corridor of half-width 15 holds the narrowest band
+(v̄ = v̄_max) with a little room to steer.
+
+Families (drawn by :func:`sample` with the env's ``np_random`` and a ``difficulty`` in
+[0, 1] that lengthens the route, adds turns and narrows the corridor; ranges below):
+
+==============  ==========================================================================
+family          shape
+==============  ==========================================================================
+``straight``    one run in any direction
+``l_route``     Manhattan L: two legs at a right angle (the first leg axis-aligned)
+``u_route``     Manhattan U: out, across, back
+``staircase``   Manhattan steps alternating x and z legs
+``detour``      a straight run blocked by a keep-out rectangle, routed around it
+``arc``         a circular arc
+``pads``        point to point through 1-3 pad segments across the route
+``band``        a straight band the serpentine must fill: a wide corridor (w ~ 15-20)
+==============  ==========================================================================
+
+``HELD_OUT`` routes are fixed and named, for evaluation only (never drawn by
+:func:`sample`).
+
+:func:`resolve` turns what ``reset(options={"target": ...})`` accepts into a Route:
+
+* a :class:`Route`;
+* a family name (drawn) or a held-out name;
+* an ``(n, 2)`` polyline: the default corridor, no pads or keep-outs, named ``"custom"``;
+* a dict ``{"waypoints": [[x, z], ...], "width": w, "pads": [[[x0, z0], [x1, z1]], ...],
+  "keepouts": [[[x, z], ...] | {"rect": [x0, z0, x1, z1]}, ...], "name": str}``; only
+  ``waypoints`` is required. Everything is translated with the waypoints so that the route
+  starts at the origin.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cnt_env.task import targets as targets_mod
+from cnt_env.task.targets import cumulative_length
+
+__all__ = [
+    "DEFAULT_HALF_WIDTH",
+    "FAMILIES",
+    "HELD_OUT",
+    "Route",
+    "draw",
+    "held_out",
+    "rectangle",
+    "resolve",
+    "sample",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Default corridor half-width w (L_vb): the narrowest measured band (27 L_vb peak to peak
+#: at v̄ = 0.13, benchmarks/results/step_response.json) fits with ~1.5 L_vb to spare.
+DEFAULT_HALF_WIDTH = 15.0
+#: Narrowest corridor accepted (L_vb): below it no flow lays a band that fits.
+MIN_HALF_WIDTH = 1.0
+#: Shortest route accepted (L_vb): one discretisation length of trace.
+MIN_ROUTE_LENGTH = 1.0
+#: Default difficulty of :func:`sample` (0: short, straight, wide; 1: long, many turns).
+DEFAULT_DIFFICULTY = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class Route:
+    """A circuit route (module doc). Arrays are float64 and read-only.
+
+    ``waypoints`` (n, 2) from the origin; ``width`` the corridor half-width w (L_vb);
+    ``pads`` (p, 2, 2) segments; ``keepouts`` a tuple of (k, 2) polygons (k >= 3);
+    ``params`` what it was built from (JSON-friendly)."""
+
+    waypoints: FloatArray
+    width: float = DEFAULT_HALF_WIDTH
+    pads: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    keepouts: tuple[FloatArray, ...] = ()
+    name: str = "custom"
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        pts = targets_mod.validated_polyline(self.waypoints)
+        if not np.array_equal(pts[0], np.zeros(2)):
+            raise ValueError(f"a route starts at the origin, got waypoints[0] = {pts[0].tolist()}")
+        if cumulative_length(pts)[-1] < MIN_ROUTE_LENGTH:
+            raise ValueError(f"a route must be at least {MIN_ROUTE_LENGTH} L_vb long")
+        w = float(self.width)
+        if not (math.isfinite(w) and w >= MIN_HALF_WIDTH):
+            raise ValueError(f"route width (half-width, L_vb) must be >= {MIN_HALF_WIDTH}, "
+                             f"got {self.width!r}")  # fmt: skip
+        pads = np.array(self.pads, dtype=np.float64).reshape(-1, 2, 2)
+        if not np.isfinite(pads).all():
+            raise ValueError("pads must be finite segments [[x0, z0], [x1, z1]]")
+        if np.any(np.hypot(*(pads[:, 1] - pads[:, 0]).T) <= 0):
+            raise ValueError("a pad segment must have non-zero length")
+        keepouts = []
+        for k in self.keepouts:
+            poly = np.array(k, dtype=np.float64)
+            if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
+                raise ValueError(f"a keep-out is a polygon of >= 3 (x, z) points, got {poly.shape}")
+            if not np.isfinite(poly).all():
+                raise ValueError("keep-out polygons must be finite")
+            poly.setflags(write=False)
+            keepouts.append(poly)
+        for arr in (pts, pads):
+            arr.setflags(write=False)
+        object.__setattr__(self, "waypoints", pts)
+        object.__setattr__(self, "width", w)
+        object.__setattr__(self, "pads", pads)
+        object.__setattr__(self, "keepouts", tuple(keepouts))
+        object.__setattr__(self, "params", dict(self.params))
+
+    @property
+    def points(self) -> FloatArray:
+        """The waypoints (the name targets use)."""
+        return self.waypoints
+
+    @property
+    def length(self) -> float:
+        """Arc length (L_vb)."""
+        return float(cumulative_length(self.waypoints)[-1])
+
+    def translated(self, offset: ArrayLike) -> tuple[FloatArray, FloatArray, tuple]:
+        """``(waypoints, pads, keepouts)`` moved by ``offset`` (2,)."""
+        o = np.asarray(offset, dtype=np.float64)
+        return self.waypoints + o, self.pads + o, tuple(k + o for k in self.keepouts)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The dict format of :func:`resolve` (JSON-friendly)."""
+        return {
+            "name": self.name,
+            "waypoints": self.waypoints.tolist(),
+            "width": self.width,
+            "pads": self.pads.tolist(),
+            "keepouts": [k.tolist() for k in self.keepouts],
+        }
+
+
+def rectangle(x0: float, z0: float, x1: float, z1: float) -> FloatArray:
+    """The polygon of the axis-aligned rectangle with corners (x0, z0), (x1, z1)."""
+    xa, xb = sorted((float(x0), float(x1)))
+    za, zb = sorted((float(z0), float(z1)))
+    if not (xb > xa and zb > za):
+        raise ValueError(f"a rectangle needs x0 != x1 and z0 != z1, got {[x0, z0, x1, z1]}")
+    return np.array([[xa, za], [xb, za], [xb, zb], [xa, zb]])
+
+
+# --------------------------------------------------------------------------- families
+
+
+def _lerp(lo: float, hi: float, t: float) -> float:
+    return lo + (hi - lo) * t
+
+
+def _width(rng: np.random.Generator, d: float) -> float:
+    """Corridor half-width: 20 at difficulty 0 down to 13 at 1, +-1."""
+    return float(_lerp(20.0, 13.0, d) + rng.uniform(-1.0, 1.0))
+
+
+def _length(rng: np.random.Generator, d: float, lo: float = 40.0, hi: float = 160.0) -> float:
+    """Route length: ~lo at difficulty 0 up to ~hi at 1, +-15%."""
+    return float(_lerp(lo, hi, d) * rng.uniform(0.85, 1.15))
+
+
+def _axis_heading(rng: np.random.Generator) -> float:
+    return float(rng.integers(4)) * math.pi / 2
+
+
+def _turn(rng: np.random.Generator) -> float:
+    return math.pi / 2 if rng.integers(2) else -math.pi / 2
+
+
+def _straight(rng: np.random.Generator, d: float) -> Route:
+    p = {"length": _length(rng, d, 30.0, 110.0), "heading": float(rng.uniform(-math.pi, math.pi))}
+    return Route(targets_mod.straight_points(**p), _width(rng, d), name="straight", params=p)
+
+
+def _l_route(rng: np.random.Generator, d: float) -> Route:
+    total = _length(rng, d)
+    split = float(rng.uniform(0.35, 0.65))
+    h, t = _axis_heading(rng), _turn(rng)
+    p = {"leg1": total * split, "leg2": total * (1 - split), "heading": h, "turn": t}
+    pts = targets_mod.l_bend_points(p["leg1"], p["leg2"], t, h)
+    return Route(pts, _width(rng, d), name="l_route", params=p)
+
+
+def _u_route(rng: np.random.Generator, d: float) -> Route:
+    w = _width(rng, d)
+    leg = _length(rng, d, 30.0, 70.0)
+    across = float(max(2.2 * w, rng.uniform(2.2, 3.0) * w))  # corridors of the legs apart
+    h, t = _axis_heading(rng), _turn(rng)
+    p = {"leg": leg, "across": across, "heading": h, "turn": t}
+    pts = targets_mod.legs_points([leg, across, leg], [h, h + t, h + 2 * t])
+    return Route(pts, w, name="u_route", params=p)
+
+
+def _staircase(rng: np.random.Generator, d: float) -> Route:
+    n_steps = round(_lerp(2, 5, d)) + int(rng.integers(0, 2))
+    step = float(rng.uniform(20.0, 35.0))
+    h, t = _axis_heading(rng), _turn(rng)
+    headings = [h if i % 2 == 0 else h + t for i in range(n_steps)]
+    p = {"n_legs": n_steps, "leg": step, "heading": h, "turn": t}
+    pts = targets_mod.legs_points([step] * n_steps, headings)
+    return Route(pts, _width(rng, d), name="staircase", params=p)
+
+
+def _detour(rng: np.random.Generator, d: float) -> Route:
+    """Around a keep-out block in the way of the straight run (canonical frame: +x)."""
+    w = _width(rng, d)
+    block = float(rng.uniform(15.0, 30.0))  # side of the keep-out along x
+    off = float(rng.uniform(2.0, 2.6) * w)  # how far the route jogs sideways
+    lead = _length(rng, d, 25.0, 45.0)
+    side = 1.0 if rng.integers(2) else -1.0
+    x1, x2 = lead, lead + block + 2 * w
+    pts = np.array([[0, 0], [x1, 0], [x1, side * off], [x2, side * off], [x2, 0],
+                    [x2 + lead, 0]], dtype=float)  # fmt: skip
+    # the keep-out sits on the straight line, between the route's jogs, w from them
+    kx0, kx1 = x1 + w, x2 - w
+    kz = sorted((-side * 0.5 * w, side * (off - w)))
+    keep = rectangle(kx0, kz[0], kx1, kz[1]) if kz[1] - kz[0] > 1 else rectangle(kx0, -2, kx1, 2)
+    h = _axis_heading(rng)
+    p = {"lead": lead, "block": block, "offset": off, "side": side, "heading": h}
+    return Route(_rot(pts, h), w, keepouts=(_rot(keep, h),), name="detour", params=p)
+
+
+def _arc(rng: np.random.Generator, d: float) -> Route:
+    w = _width(rng, d)
+    sweep = float(rng.uniform(math.pi / 3, _lerp(math.pi / 2, math.pi, d)))
+    radius = float(max(1.5 * w, _length(rng, d) / sweep))
+    sweep *= 1.0 if rng.integers(2) else -1.0
+    p = {"radius": radius, "sweep": sweep, "heading": float(rng.uniform(-math.pi, math.pi))}
+    return Route(targets_mod.arc_points(**p), w, name="arc", params=p)
+
+
+def _pads(rng: np.random.Generator, d: float) -> Route:
+    """Point to point: an L or a straight run with 1-3 pads across it."""
+    base = _l_route(rng, d) if rng.integers(2) else _straight(rng, d)
+    pts, w = base.waypoints, base.width
+    s = cumulative_length(pts)
+    n = 1 + int(rng.integers(0, 3))
+    pads = []
+    for f in np.sort(rng.uniform(0.3, 1.0, n)):
+        at = f * s[-1]
+        c = np.array([np.interp(at, s, pts[:, k]) for k in (0, 1)])
+        i = min(int(np.searchsorted(s, at, side="right")) - 1, len(pts) - 2)
+        t = (pts[i + 1] - pts[i]) / np.hypot(*(pts[i + 1] - pts[i]))
+        nrm = np.array([-t[1], t[0]])
+        pads.append([c - 0.8 * w * nrm, c + 0.8 * w * nrm])
+    p = {"base": base.name, **base.params, "n_pads": n}
+    return Route(pts, w, pads=np.array(pads), name="pads", params=p)
+
+
+def _band(rng: np.random.Generator, d: float) -> Route:
+    """A band for the serpentine to fill: a run across the steps (±x), wide corridor."""
+    p = {"length": _length(rng, d, 40.0, 120.0),
+         "heading": 0.0 if rng.integers(2) else math.pi}  # fmt: skip
+    w = float(rng.uniform(15.0, 20.0))
+    return Route(targets_mod.straight_points(**p), w, name="band", params=p)
+
+
+def _rot(points: FloatArray, heading: float) -> FloatArray:
+    c, s = math.cos(heading), math.sin(heading)
+    return np.asarray(points, dtype=float) @ np.array([[c, s], [-s, c]])
+
+
+#: Training families: name -> draw(rng, difficulty) -> Route.
+FAMILIES: dict[str, Callable[[np.random.Generator, float], Route]] = {
+    "straight": _straight,
+    "l_route": _l_route,
+    "u_route": _u_route,
+    "staircase": _staircase,
+    "detour": _detour,
+    "arc": _arc,
+    "pads": _pads,
+    "band": _band,
+}
+
+
+def draw(family: str, rng: np.random.Generator, difficulty: float = DEFAULT_DIFFICULTY) -> Route:
+    """One route of ``family`` drawn from ``rng`` at ``difficulty`` in [0, 1]."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown route family {family!r}; choose one of {sorted(FAMILIES)}")
+    if not (0.0 <= difficulty <= 1.0):
+        raise ValueError(f"difficulty must be in [0, 1], got {difficulty!r}")
+    return FAMILIES[family](rng, float(difficulty))
+
+
+def sample(rng: np.random.Generator, families: Sequence[str] | None = None,
+           difficulty: float = DEFAULT_DIFFICULTY) -> Route:  # fmt: skip
+    """A training route: a family chosen uniformly, then drawn. Never a held-out one."""
+    names = tuple(FAMILIES) if families is None else tuple(families)
+    if not names:
+        raise ValueError("families must name at least one family")
+    return draw(names[int(rng.integers(len(names)))], rng, difficulty)
+
+
+# --------------------------------------------------------------------------- held out
+
+
+def _held_out_specs() -> dict[str, dict[str, Any]]:
+    u = [[0, 0], [60, 0], [60, 40], [0, 40]]
+    return {
+        # the U-turn of issue 10 (0,0)-(60,0)-(60,40)-(0,40): 160 L_vb, w = 15
+        "u_turn": {"waypoints": u, "width": 15.0},
+        "l_up": {"waypoints": [[0, 0], [50, 0], [50, 60]], "width": 15.0},
+        "against_flow": {"waypoints": [[0, 0], [-90, 0]], "width": 15.0},
+        "diagonal": {"waypoints": [[0, 0], [70, 70]], "width": 15.0},
+        "staircase3": {"waypoints": [[0, 0], [30, 0], [30, 30], [60, 30], [60, 60]], "width": 15.0},
+        "detour_block": {
+            "waypoints": [[0, 0], [30, 0], [30, 36], [90, 36], [90, 0], [120, 0]],
+            "width": 15.0,
+            "keepouts": [{"rect": [45, -8, 75, 21]}],
+        },
+        "arc_quarter": {
+            "waypoints": targets_mod.arc_points(60.0, math.pi / 2, 0.0).tolist(),
+            "width": 15.0,
+        },
+        "pads_line": {
+            "waypoints": [[0, 0], [0, 100]],
+            "width": 12.0,
+            "pads": [[[-10, 50], [10, 50]], [[-10, 90], [10, 90]]],
+        },
+        "band_fill": {"waypoints": [[0, 0], [100, 0]], "width": 18.0},
+    }
+
+
+#: Names of the held-out routes (evaluation only).
+HELD_OUT: tuple[str, ...] = tuple(_held_out_specs())
+
+
+def held_out(name: str) -> Route:
+    """The held-out route ``name``."""
+    specs = _held_out_specs()
+    if name not in specs:
+        raise ValueError(f"unknown held-out route {name!r}; choose one of {list(HELD_OUT)}")
+    return from_dict({**specs[name], "name": name})
+
+
+def from_dict(spec: Mapping[str, Any]) -> Route:
+    """A Route from the dict format (module doc), translated to start at the origin."""
+    unknown = set(spec) - {"waypoints", "width", "pads", "keepouts", "name", "params"}
+    if unknown:
+        raise ValueError(f"unknown route keys {sorted(unknown)}; known: waypoints, width, "
+                         "pads, keepouts, name")  # fmt: skip
+    if "waypoints" not in spec:
+        raise ValueError("a route dict needs 'waypoints': [[x, z], ...]")
+    pts = targets_mod.validated_polyline(spec["waypoints"])
+    o = pts[0].copy()
+    keepouts = []
+    for k in spec.get("keepouts") or ():
+        if isinstance(k, Mapping):
+            if set(k) != {"rect"}:
+                raise ValueError(f"a keep-out dict is {{'rect': [x0, z0, x1, z1]}}, got {k!r}")
+            k = rectangle(*k["rect"])
+        keepouts.append(np.asarray(k, dtype=float) - o)
+    pads = np.asarray(spec.get("pads") or np.zeros((0, 2, 2)), dtype=float).reshape(-1, 2, 2)
+    return Route(pts - o, float(spec.get("width", DEFAULT_HALF_WIDTH)), pads - o,
+                 tuple(keepouts), str(spec.get("name", "custom")),
+                 dict(spec.get("params") or {}))  # fmt: skip
+
+
+def resolve(spec: Any, rng: np.random.Generator, difficulty: float = DEFAULT_DIFFICULTY,
+            width: float = DEFAULT_HALF_WIDTH) -> Route:  # fmt: skip
+    """What ``reset(options={"target": spec})`` accepts, as a :class:`Route` (module doc).
+    A bare polyline gets the corridor half-width ``width``; a thin-task
+    :class:`~cnt_env.task.targets.Target` becomes a route along its points."""
+    if isinstance(spec, Route):
+        return spec
+    if isinstance(spec, targets_mod.Target):
+        return Route(spec.points, width, name=spec.name, params=spec.params)
+    if isinstance(spec, str):
+        if spec in FAMILIES:
+            return draw(spec, rng, difficulty)
+        if spec in HELD_OUT:
+            return held_out(spec)
+        if spec in targets_mod.HELD_OUT or spec in targets_mod.FAMILIES:
+            t = targets_mod.resolve(spec, rng)
+            return Route(t.points, width, name=t.name, params=t.params)
+        raise ValueError(
+            f"unknown route {spec!r}: a family {sorted(FAMILIES)}, a held-out route "
+            f"{list(HELD_OUT)}, a thin target name, an (n, 2) polyline or a route dict"
+        )
+    if isinstance(spec, Mapping):
+        return from_dict(spec)
+    pts = targets_mod.validated_polyline(spec)
+    return Route(pts - pts[0], width)
