@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from cnt_env import cli, replay, units
-from cnt_env.io import save_trace
+from cnt_env.io import load_trace, save_trace
 from cnt_env.replay import (
     EPISODE_FORMAT,
     EpisodeFileError,
@@ -468,3 +468,15 @@ def test_missing_imageio_says_how_to_install(monkeypatch: pytest.MonkeyPatch, tm
     monkeypatch.setitem(sys.modules, "imageio", None)
     with pytest.raises(ImportError, match=r'pip install -e "\.\[video\]"'):
         replay.write_video(synthetic_episode(1), tmp_path / "x.gif")
+
+
+def test_saved_run_video(iio, tmp_path: Path) -> None:
+    """A trace file as a video: the trace revealed in order of deposition, one extent."""
+    saved = load_trace(_synthetic_trace(tmp_path / "long.npz"))
+    trace = save_trace(tmp_path / "trace.npz", saved["trace"][:12], saved["params"],
+                       saved["config"], saved["stats"], saved["suspended"])  # fmt: skip
+    gif = replay.write_video(trace, tmp_path / "trace.gif", size=(240, 240))
+    frames = iio.imread(gif, index=None)
+    assert frames.shape == (11, 240, 240, 3)  # 2, 3, ..., 12 nodes shown
+    raw = list(replay.video.trace_frames(saved, max_frames=5, size=(240, 240)))
+    assert len(raw) == 5 and np.array_equal(raw[0][:, :30], raw[-1][:, :30])

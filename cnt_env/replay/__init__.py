@@ -24,7 +24,8 @@ module              job
                     :func:`record_run` (as it goes)
 ``rrd``             :func:`read_rrd`: what a recording holds
 ``still``           :func:`render_top_view`: a PNG of one frame (matplotlib)
-``video``           :func:`write_video`: a GIF or MP4 of an episode (the ``[video]`` extra)
+``video``           :func:`write_video`: a GIF or MP4 of an episode or a saved run
+                    (the ``[video]`` extra)
 ==================  =================================================================
 
 Recordings
@@ -100,7 +101,7 @@ from cnt_env.replay.simulation import (
     record_simulation,
 )
 from cnt_env.replay.still import render_top_view
-from cnt_env.replay.video import VIDEO_INSTALL_HINT, episode_frames, write_video
+from cnt_env.replay.video import VIDEO_INSTALL_HINT, episode_frames, trace_frames, write_video
 from cnt_env.replay.wrappers import (
     EpisodeBuffer,
     EpisodeSaver,
@@ -137,5 +138,6 @@ __all__ = [
     "record_simulation",
     "render_top_view",
     "save_episode",
+    "trace_frames",
     "write_video",
 ]

@@ -1,10 +1,11 @@
-"""Episodes as video: a GIF or MP4 of an episode (the optional ``[video]`` extra).
+"""Episodes and runs as video: a GIF or MP4 (the optional ``[video]`` extra).
 
 :func:`episode_frames` draws every frame of an :class:`~cnt_env.replay.episode.Episode`
 with :func:`cnt_env.plotting.draw_top_view` at ONE extent for the whole episode
 (:func:`episode_extent`; no re-zoom from frame to frame), with a legend and a scale bar
 in L_vb and micrometres. Only the moving parts (trace, rod, contact point, flow, title)
-are redrawn from frame to frame. :func:`write_video` writes those frames, or any RGB
+are redrawn from frame to frame. :func:`trace_frames` does the same for a saved run
+(the trace revealed in order of deposition). :func:`write_video` writes those frames, or any RGB
 frames (e.g. ``env.render()`` output), to ``.gif`` (Pillow) or ``.mp4`` (ffmpeg through
 imageio-ffmpeg, whose wheel ships the binary). Install the extra with
 ``pip install -e ".[video]"``; matplotlib is a core dependency.
@@ -12,15 +13,25 @@ imageio-ffmpeg, whose wheel ships the binary). Install the extra with
 
 from __future__ import annotations
 
+import math
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cnt_env.plotting import agg_figure, draw_top_view, figure_rgb, top_view_extent
-from cnt_env.replay.episode import Episode, load_episode, route_geometry
+from cnt_env.io import TRACE_FORMAT, load_trace
+from cnt_env.plotting import (
+    agg_figure,
+    draw_top_view,
+    figure_rgb,
+    flow_arrow_scale,
+    lvb_in_um,
+    top_view_extent,
+)
+from cnt_env.replay.episode import Episode, file_format, is_number, load_episode, route_geometry
+from cnt_env.replay.simulation import SAVED_RUN_FRAMES
 from cnt_env.replay.still import episode_view_kwargs
 
 __all__ = [
@@ -29,6 +40,7 @@ __all__ = [
     "episode_extent",
     "episode_frames",
     "import_imageio",
+    "trace_frames",
     "write_video",
 ]
 
@@ -103,8 +115,50 @@ def episode_frames(
         yield figure_rgb(fig)
 
 
+def trace_frames(
+    saved: Mapping[str, Any] | str | os.PathLike[str],
+    *,
+    max_frames: int = SAVED_RUN_FRAMES,
+    extent: tuple[float, float, float, float] | None = None,
+    size: tuple[int, int] = DEFAULT_SIZE,
+) -> Iterator[np.ndarray]:
+    """The frames of a saved run (a trace file, ``cnt-sim run --out``, or
+    :func:`cnt_env.io.load_trace`'s dict): a trace file has no time history, so the
+    trace is revealed in order of deposition over at most ``max_frames`` frames (as
+    ``cnt-sim replay`` does in rerun), the saved suspended rod on the last. One extent
+    (default: the whole trace) for all."""
+    from cnt_env.io import load_trace
+
+    if not isinstance(saved, Mapping):
+        saved = load_trace(saved)
+    trace = np.asarray(saved["trace"], dtype=np.float64)
+    params, config = saved.get("params") or {}, saved.get("config") or {}
+    rod = saved.get("suspended")
+    rod = None if rod is None or not len(rod) else np.asarray(rod, dtype=np.float64)
+    vbar, phi = float(params.get("vbar") or 0.0), float(params.get("phi") or 0.0)
+    flow = (vbar * math.cos(phi), vbar * math.sin(phi))
+    extent = top_view_extent(trace, rod) if extent is None else tuple(extent)
+    fig = agg_figure(size)
+    ax = fig.add_subplot()
+    substrate = config.get("substrate") or "flat"
+    view = draw_top_view(ax, trace[:2], rod=rod, flow=flow if vbar > 0 else None,
+                         flow_scale=flow_arrow_scale(params.get("Hbar"), vbar),
+                         extent=extent, um_per_lvb=lvb_in_um(substrate))  # fmt: skip
+    title = ax.set_title("", fontsize="small")
+    n = len(trace)
+    sim_time = (saved.get("stats") or {}).get("time")
+    at_end = f", t = {sim_time:.4g} tau" if is_number(sim_time) else ""
+    name = f"{config.get('preset', 'run')} on the {substrate} substrate"
+    marks = np.unique(np.linspace(2, n, max(1, min(max_frames, n - 1))).round().astype(int))
+    for k in marks:
+        last = k == n
+        view.update(trace[:k], rod if last else None, flow if vbar > 0 and last else None)
+        title.set_text(f"{name}\n{k}/{n} trace nodes{at_end if last else ''}")
+        yield figure_rgb(fig)
+
+
 def write_video(
-    episode_or_frames: Episode | str | os.PathLike[str] | Iterable[np.ndarray],
+    episode_or_frames: Episode | str | os.PathLike[str] | Mapping[str, Any] | Iterable[np.ndarray],
     path: str | os.PathLike[str],
     *,
     fps: float = 10.0,
@@ -115,8 +169,10 @@ def write_video(
 ) -> Path:
     """Write a video of an episode to ``path`` (``.gif`` or ``.mp4``, by its suffix).
 
-    ``episode_or_frames``: an :class:`Episode`, an episode file (``.npz``), or RGB frames
-    (uint8 (H, W, 3) arrays of one size, e.g. ``env.render()`` output) written as given.
+    ``episode_or_frames``: an :class:`Episode`, an episode file (``.npz``), a saved run
+    (a trace file or :func:`cnt_env.io.load_trace`'s dict: :func:`trace_frames`), or RGB
+    frames (uint8 (H, W, 3) arrays of one size, e.g. ``env.render()`` output) written as
+    given.
     For an episode, ``extent`` (x0, x1, z0, z1) in L_vb fixes the view (default: the
     whole episode, :func:`episode_extent`), ``size`` is (width, height) in pixels and
     ``every`` keeps every n-th step. ``fps``: frames per second; ``loop``: GIF repeats
@@ -130,12 +186,16 @@ def write_video(
         raise ValueError(f"{path}: write a {' or '.join(VIDEO_FORMATS)} file")
     if not (isinstance(fps, (int, float)) and 0 < fps <= 120):
         raise ValueError(f"fps must be in (0, 120], got {fps!r}")
-    if isinstance(episode_or_frames, (Episode, str, os.PathLike)):
-        frames: Iterable[np.ndarray] = episode_frames(
-            episode_or_frames, extent=extent, size=size, every=every
-        )
+    source = episode_or_frames
+    frames: Iterable[np.ndarray]
+    if isinstance(source, (str, os.PathLike)) and file_format(source) == TRACE_FORMAT:
+        source = load_trace(source)
+    if isinstance(source, Mapping):
+        frames = trace_frames(source, extent=extent, size=size)
+    elif isinstance(source, (Episode, str, os.PathLike)):
+        frames = episode_frames(source, extent=extent, size=size, every=every)
     else:
-        frames = episode_or_frames
+        frames = source
     path.parent.mkdir(parents=True, exist_ok=True)
     n = 0
     shape = None
