@@ -160,3 +160,22 @@ def test_draw_route_alone() -> None:
     assert LABELS["target_done"] in labels and LABELS["pad"] in labels
     assert len(ax.collections) == 1  # the corridor band
     fig.canvas.draw()
+
+
+def test_renderer_blits_the_same_picture_as_a_full_draw() -> None:
+    """TopViewRenderer draws the static part once; its frames match a full draw."""
+    trace = spiral(80)
+    target = np.array([[0.0, 0.0], [20.0, 0.0]])
+    rod = np.column_stack([np.full(5, trace[-1, 0]), np.arange(5.0), np.linspace(0, 3, 5)])
+    kw = dict(target=target, n_start=10, corridor=2.0, flow_scale=40.0, um_per_lvb=0.1,
+              target_done=np.zeros((0, 2)), rod=rod, flow=(0.0, 0.0))  # fmt: skip
+    extent = top_view_extent(trace, target)
+    renderer = plotting.TopViewRenderer(extent, (320, 320), **kw)
+    first = renderer.render(trace[:20], title="a")
+    state = dict(rod=rod, flow=(0.05, 0.02), target_done=np.array([[0.0, 0.0], [8.0, 0.0]]))
+    frame = renderer.render(trace, title="b", **state)
+    assert frame.shape == (320, 320, 3) and not np.array_equal(first, frame)
+    full = top_view_image(trace, size=(320, 320), title="b", extent=extent,
+                          **{**kw, **state})  # fmt: skip
+    differ = np.any(frame != full, axis=2).mean()
+    assert differ < 0.01, differ  # the same picture (draw order may differ at a few pixels)

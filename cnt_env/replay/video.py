@@ -22,14 +22,7 @@ from typing import Any
 import numpy as np
 
 from cnt_env.io import TRACE_FORMAT, load_trace
-from cnt_env.plotting import (
-    agg_figure,
-    draw_top_view,
-    figure_rgb,
-    flow_arrow_scale,
-    lvb_in_um,
-    top_view_extent,
-)
+from cnt_env.plotting import TopViewRenderer, flow_arrow_scale, lvb_in_um, top_view_extent
 from cnt_env.replay.episode import Episode, file_format, is_number, load_episode, route_geometry
 from cnt_env.replay.simulation import SAVED_RUN_FRAMES
 from cnt_env.replay.still import episode_view_kwargs
@@ -100,19 +93,13 @@ def episode_frames(
         raise ValueError(f"extent must be (x0, x1, z0, z1) with x0 < x1 and z0 < z1: {extent}")
     last = len(episode.step) - 1
     indices = sorted({*range(0, last + 1, every), last})
-    fig = agg_figure(size)
-    ax = fig.add_subplot()
-    view = draw_top_view(ax, extent=extent, z_down=z_down, **episode_view_kwargs(episode, 0))
+    renderer = TopViewRenderer(extent, size, z_down=z_down, **episode_view_kwargs(episode, 0))
     meta = episode.meta
     name = f"{meta.get('recording_id') or 'episode'}: target {meta.get('target')}"
-    title = ax.set_title("", fontsize="small")
     for i in indices:
         kw = episode_view_kwargs(episode, i)
-        view.update(kw["trace"], kw["rod"], kw["flow"])
-        title.set_text(
-            f"{name}\nstep {int(episode.step[i])}/{last}, t = {float(episode.sim_time[i]):.4g} tau"
-        )
-        yield figure_rgb(fig)
+        when = f"step {int(episode.step[i])}/{last}, t = {float(episode.sim_time[i]):.4g} tau"
+        yield renderer.render(kw["trace"], kw["rod"], kw["flow"], title=f"{name}\n{when}")
 
 
 def trace_frames(
@@ -138,13 +125,10 @@ def trace_frames(
     vbar, phi = float(params.get("vbar") or 0.0), float(params.get("phi") or 0.0)
     flow = (vbar * math.cos(phi), vbar * math.sin(phi))
     extent = top_view_extent(trace, rod) if extent is None else tuple(extent)
-    fig = agg_figure(size)
-    ax = fig.add_subplot()
     substrate = config.get("substrate") or "flat"
-    view = draw_top_view(ax, trace[:2], rod=rod, flow=flow if vbar > 0 else None,
-                         flow_scale=flow_arrow_scale(params.get("Hbar"), vbar),
-                         extent=extent, um_per_lvb=lvb_in_um(substrate))  # fmt: skip
-    title = ax.set_title("", fontsize="small")
+    renderer = TopViewRenderer(extent, size, rod=rod, flow=flow if vbar > 0 else None,
+                               flow_scale=flow_arrow_scale(params.get("Hbar"), vbar),
+                               um_per_lvb=lvb_in_um(substrate))  # fmt: skip
     n = len(trace)
     sim_time = (saved.get("stats") or {}).get("time")
     at_end = f", t = {sim_time:.4g} tau" if is_number(sim_time) else ""
@@ -152,9 +136,9 @@ def trace_frames(
     marks = np.unique(np.linspace(2, n, max(1, min(max_frames, n - 1))).round().astype(int))
     for k in marks:
         last = k == n
-        view.update(trace[:k], rod if last else None, flow if vbar > 0 and last else None)
-        title.set_text(f"{name}\n{k}/{n} trace nodes{at_end if last else ''}")
-        yield figure_rgb(fig)
+        title = f"{name}\n{k}/{n} trace nodes{at_end if last else ''}"
+        yield renderer.render(trace[:k], rod if last else None,
+                              flow if vbar > 0 and last else None, title=title)  # fmt: skip
 
 
 def write_video(
