@@ -7,9 +7,11 @@ The one implementation, used by the training wrapper (``training/common.py``
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["BASES", "WRAPPER", "combine", "make_base_policy", "residual_settings"]
+__all__ = ["BASES", "WRAPPER", "combine", "make_base_policy", "residual_settings", "zoo_entry"]
 
 #: Base policies a residual agent can correct.
 BASES = ("scripted",)
@@ -23,12 +25,18 @@ def residual_settings(entry: dict) -> dict | None:
     ``residual`` key; None for a plain agent."""
     if entry.get("residual"):
         return dict(entry["residual"])
-    wrappers = entry.get("env_wrapper") or []
-    for w in wrappers if isinstance(wrappers, list) else [wrappers]:
-        if w == WRAPPER:
+    return zoo_entry(entry.get("env_wrapper"), WRAPPER)
+
+
+def zoo_entry(entries: Any, name: str) -> dict[str, Any] | None:
+    """The kwargs of ``name`` in an rl-zoo list (``env_wrapper``, ``callback``): entries
+    are a name, or a one-key dict name -> kwargs; a single entry may stand alone.
+    None when ``name`` is absent."""
+    for e in entries if isinstance(entries, list) else [entries] if entries else []:
+        if e == name:
             return {}
-        if isinstance(w, dict) and WRAPPER in w:
-            return dict(w[WRAPPER] or {})
+        if isinstance(e, dict) and name in e:
+            return dict(e[name] or {})
     return None
 
 

@@ -18,7 +18,9 @@ mean is that centre), toward a point ``lookahead`` L_vb ahead on the route:
   slice holds the nearest keep-out point);
 * the speed: the fastest flow whose band fits the corridor (the amplitude curve
   ``policies/data/amplitude_curve.json``: A = 14 L_vb at v̄ = 0.13, 17 at 0.1, ...),
-  v̄_max when none fits (the narrowest band). Faster flow also drifts faster.
+  v̄_max when none fits (the narrowest band). With the measured curve that is v̄_max for
+  every corridor: the fastest flow both drifts fastest (0.21 L_vb per L_vb at 0.13, 0.11
+  at 0.065) and lays the narrowest band. ``margin`` narrows what "fits".
 """
 
 from __future__ import annotations

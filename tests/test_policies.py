@@ -99,3 +99,42 @@ def test_pretrained_models_load_with_their_normalisation(name: str) -> None:
     obs[32:64] = np.column_stack([2.0 * np.arange(1, 17), np.zeros(16)]).ravel()
     a = pol.act(obs)
     assert a.shape == (2,) and np.all(np.abs(a) <= 1.0)
+
+
+def test_constant_search_on_routes_scores_with_the_env_score() -> None:
+    from cnt_env.task import routes
+    from cnt_env.task.scoring import score_route_trace
+    from policies.constant import ConstantTrace, search
+
+    u = routes.held_out("u_turn")
+    along = T.resample(u.waypoints, 1.0)[0]
+    off = along + np.array([0.0, -40.0])  # parallel but outside the corridor
+    n = np.arange(10, len(along) + 10, 10).clip(max=len(along))
+    traces = [ConstantTrace(0.1, 0.0, 0, along, n), ConstantTrace(0.13, 1.0, 0, off, n)]
+    best, rows = search(traces, ["u_turn"], 2.0, score="corridor", step_limits={"u_turn": 5})
+    assert best["u_turn"]["vbar"] == 0.1
+    cut = score_route_trace(along, u, n[:5])  # cut at the route's episode length
+    assert best["u_turn"]["score"] == pytest.approx(cut["score"]) and cut["progress"] < 1.0
+    assert {r["vbar"] for r in rows} == {0.1, 0.13}
+
+
+def test_route_follower_steers_the_centre_along_the_route() -> None:
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    layout = ObservationLayout(16, 16, (2.0, 8.0, 77.5, 155.0), route=True)
+    pol = RouteFollower(layout.slices, 0.13)
+    obs = np.zeros(layout.size)
+    sl = layout.slices
+    # the band's centre 5 L_vb below the contact point, the route ahead along +x at z = 0
+    obs[sl["trace"]] = np.column_stack([np.linspace(-20, 0, 16), np.full(16, -5.0)]).ravel()
+    obs[sl["target"]] = np.column_stack([2.0 * np.arange(1, 17), np.zeros(16)]).ravel()
+    obs[sl["route"]] = [15.0, 1000.0, 1000.0]  # no keep-out
+    vbar, phi = flow_from_action(pol.act(obs), 0.13)
+    assert vbar == pytest.approx(0.13, rel=1e-4)  # the narrowest band fits w = 15
+    assert 0.0 < phi < math.pi / 4  # ahead, and back up toward the route's line
+    obs[sl["route"]] = [15.0, 0.0, -12.0]  # a keep-out just below the centre
+    _, phi_k = flow_from_action(pol.act(obs), 0.13)
+    assert phi_k > phi  # pushed away from it
+    # the fastest flow drifts fastest and lays the narrowest band: every corridor gets it
+    assert pol.speed_for(40.0) == pol.speed_for(10.0) == 0.13

@@ -129,3 +129,14 @@ def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     assert b"task/score" in events and b"task/progress" in events
     again = fresh_dir(tmp_path / "ppo_s0")
     assert again != run and again.name == "ppo_s0_2"
+
+
+def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 3}}
+    table = evaluate(["random", "scripted"], ["u_turn"], [0, 1], config, tmp_path, jobs=2)
+    overall = {r["policy"]: r for r in table if r["target"] == "ALL"}
+    assert set(overall) == {"random", "scripted"}
+    for r in overall.values():
+        assert 0.0 <= r["score_mean"] <= 1.0

@@ -14,7 +14,7 @@ import yaml
 
 from cnt_env.task import routes
 from cnt_env.task import targets as targets_mod
-from policies.residual import combine, make_base_policy
+from policies.residual import combine, make_base_policy, zoo_entry
 
 __all__ = [
     "CONFIG_DIR",
@@ -85,13 +85,7 @@ def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
 
 def callback_settings(config: dict[str, Any], name: str) -> dict[str, Any] | None:
     """The kwargs of callback ``name`` in the config's ``callback`` list (None if absent)."""
-    entries = config.get("callback") or []
-    for c in entries if isinstance(entries, list) else [entries]:
-        if c == name:
-            return {}
-        if isinstance(c, dict) and name in c:
-            return dict(c[name] or {})
-    return None
+    return zoo_entry(config.get("callback"), name)
 
 
 def eval_settings(config: dict[str, Any]) -> dict[str, Any]:
