@@ -17,6 +17,10 @@ over the steps in ``amortised_overhead_ms_per_step``. ``step_ms`` gives the abso
 median step times for scale. Not counted: the CPU that rerun's background threads
 (chunk batching, file writing) take from the env on a machine with few free cores.
 
+With the ``[video]`` extra, ``video`` gives the cost of an episode's video
+(:func:`cnt_env.replay.write_video`, 640 x 640): drawing the frames alone, and writing a
+GIF and an MP4, per frame.
+
 The bare env runs first: the JSON says whether rerun was imported by then (it must not
 be) and whether every wrapped rollout equals the bare one exactly (the wrappers must
 not change the env). Episodes that end early (target laid, failure) restart with the
@@ -164,6 +168,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 )
                 if variant == "rerun_recorder" and r == 0:
                     rrd_bytes = sum(p.stat().st_size for p in out_dir.glob("*.rrd"))
+        video = video_cost(sorted((Path(tmp) / "episode_saver0").glob("*.npz"))[0], Path(tmp))
 
     import rerun
 
@@ -191,6 +196,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             k: overhead[k] + (end_ms[k] - end_ms["bare"]) / per_episode for k in variants
         },
         "rrd_bytes_per_step": rrd_bytes / args.steps,
+        "video": video,
         "rerun_imported_by_bare_env": rerun_after_bare,
         "wrapped_rollouts_identical_to_bare": bool(identical),
         "rerun_version": rerun.__version__,
@@ -202,6 +208,29 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.out:
         Path(args.out).write_text(text + "\n")
     return report
+
+
+def video_cost(episode_file: Path, tmp: Path, size: tuple[int, int] = (640, 640)) -> Any:
+    """Cost of an episode's video (cnt_env.replay.video): drawing the frames alone, and
+    writing a GIF and an MP4, in ms per frame; None without the [video] extra."""
+    from cnt_env.replay import episode_frames, load_episode, write_video
+
+    try:
+        import imageio  # noqa: F401
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        return None
+    episode = load_episode(episode_file)
+    t0 = time.perf_counter()
+    n = sum(1 for _ in episode_frames(episode, size=size))
+    draw = time.perf_counter() - t0
+    out: dict[str, Any] = {"frames": n, "size": list(size), "draw_ms_per_frame": 1e3 * draw / n}
+    for suffix in ("gif", "mp4"):
+        t0 = time.perf_counter()
+        path = write_video(episode, tmp / f"episode.{suffix}", size=size)
+        out[f"{suffix}_ms_per_frame"] = 1e3 * (time.perf_counter() - t0) / n
+        out[f"{suffix}_bytes_per_frame"] = path.stat().st_size / n
+    return out
 
 
 if __name__ == "__main__":
