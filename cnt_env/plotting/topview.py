@@ -349,7 +349,10 @@ def draw_top_view(
         proxy.set_label(LABELS["flow"])
         ax.add_line(proxy)
     ax.set_aspect("equal", adjustable="box" if extent is not None else "datalim")
-    if extent is not None:
+    if extent is None:  # fit what update() drew too (set_data leaves the data limits)
+        ax.relim()
+        ax.autoscale_view()
+    else:
         x0, x1, z0, z1 = extent
         ax.set_xlim(x0, x1)
         ax.set_ylim(z0, z1)

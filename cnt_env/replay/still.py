@@ -7,10 +7,28 @@ import os
 from pathlib import Path
 from typing import Any
 
-from cnt_env.plotting import draw_top_view, flow_arrow_scale, lvb_in_um
+from cnt_env.plotting import draw_top_view, flow_arrow_scale, lvb_in_um, top_view_extent
 from cnt_env.replay.episode import Episode, load_episode, route_geometry
 
-__all__ = ["episode_view_kwargs", "render_top_view"]
+__all__ = ["episode_extent", "episode_view_kwargs", "render_top_view"]
+
+# Nodes of the trace laid before reset that the extent still holds (the start-up arc
+# of a warm start can be far longer than the episode).
+_BEFORE_NODES = 50
+
+
+def episode_extent(episode: Episode, *, margin: float = 0.08) -> tuple[float, float, float, float]:
+    """The fixed square extent ``(x0, x1, z0, z1)`` of an episode's frames: the target
+    and its route (corridor, pads, keep-outs), the episode's trace, the last few nodes
+    laid before it and the rod of every frame."""
+    n0 = episode.n_start
+    sets: list[Any] = [episode.target, episode.trace[max(0, n0 - _BEFORE_NODES) :]]
+    route = route_geometry(episode.meta)
+    if route is not None and len(episode.target):
+        w = route["width"]
+        sets += [episode.target + d for d in ((w, w), (-w, -w))]
+        sets += [*route["pads"], *route["keepouts"]]
+    return top_view_extent(*sets, episode.rod_nodes, margin=margin)
 
 
 def episode_view_kwargs(episode: Episode, i: int) -> dict[str, Any]:
@@ -45,7 +63,9 @@ def render_top_view(
     """Save the top view of an episode's frame (default: the last) as a PNG, drawn like
     the recording's ``top`` view (:func:`cnt_env.plotting.draw_top_view`): the target,
     the trace before reset, the episode's trace, the suspended rod seen from above and
-    the flow, with a legend and a scale bar. x to the right, z down, as in the viewer."""
+    the flow, with a legend and a scale bar, at the extent of the whole episode
+    (:func:`episode_extent`, as the video's frames). x to the right, z down, as in the
+    viewer."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -55,7 +75,9 @@ def render_top_view(
     fig = Figure(figsize=(6, 6.6), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    draw_top_view(ax, z_down=True, **episode_view_kwargs(episode, i))
+    draw_top_view(
+        ax, extent=episode_extent(episode), z_down=True, **episode_view_kwargs(episode, i)
+    )
     meta = episode.meta
     ax.set_title(
         f"{meta.get('recording_id', '')}: target {meta.get('target')}, "

@@ -23,9 +23,9 @@ import numpy as np
 
 from cnt_env.io import TRACE_FORMAT, load_trace
 from cnt_env.plotting import TopViewRenderer, flow_arrow_scale, lvb_in_um, top_view_extent
-from cnt_env.replay.episode import Episode, file_format, is_number, load_episode, route_geometry
+from cnt_env.replay.episode import Episode, file_format, is_number, load_episode
 from cnt_env.replay.simulation import SAVED_RUN_FRAMES
-from cnt_env.replay.still import episode_view_kwargs
+from cnt_env.replay.still import episode_extent, episode_view_kwargs
 
 __all__ = [
     "VIDEO_FORMATS",
@@ -41,9 +41,6 @@ VIDEO_INSTALL_HINT = 'pip install -e ".[video]"'
 VIDEO_FORMATS = (".gif", ".mp4")
 #: Frame size (width, height) in pixels: multiples of 16, as H.264 encoders like.
 DEFAULT_SIZE = (640, 640)
-# Nodes of the trace laid before reset that the extent still holds (the start-up arc
-# of a warm start can be far longer than the episode).
-_BEFORE_NODES = 50
 
 
 def import_imageio() -> Any:
@@ -57,20 +54,6 @@ def import_imageio() -> Any:
             f"install them with `{VIDEO_INSTALL_HINT}` (or `pip install imageio imageio-ffmpeg`)"
         ) from exc
     return imageio
-
-
-def episode_extent(episode: Episode, *, margin: float = 0.08) -> tuple[float, float, float, float]:
-    """The fixed square extent ``(x0, x1, z0, z1)`` of an episode's frames: the target
-    and its route (corridor, pads, keep-outs), the episode's trace, the last few nodes
-    laid before it and the rod of every frame."""
-    n0 = episode.n_start
-    sets: list[Any] = [episode.target, episode.trace[max(0, n0 - _BEFORE_NODES) :]]
-    route = route_geometry(episode.meta)
-    if route is not None and len(episode.target):
-        w = route["width"]
-        sets += [episode.target + d for d in ((w, w), (-w, -w))]
-        sets += [*route["pads"], *route["keepouts"]]
-    return top_view_extent(*sets, episode.rod_nodes, margin=margin)
 
 
 def episode_frames(
