@@ -18,7 +18,7 @@ paper's constant flow (v̄ = 0.037 along +x) and measures the serpentine it lays
 sets the episode length (max_episode_steps). Prints one JSON object.
 
     python benchmarks/env_throughput.py [--steps 200] [--coarse-delta 4] [--small]
-                                        [--baseline 600]
+                                        [--baseline 600] [--score thin|corridor]
 """
 
 from __future__ import annotations
@@ -175,10 +175,17 @@ def main(argv: list[str] | None = None) -> None:
         default=0,
         help="also lay this many control steps at the preset's constant flow",
     )
+    parser.add_argument(
+        "--score",
+        choices=("thin", "corridor"),
+        default="thin",
+        help="task: thin (control steps of ~1 L_vb, the recorded figures) or corridor "
+        "(the route task, ~8 L_vb per step)",
+    )
     args = parser.parse_args(argv)
-    base: dict = {}
+    base: dict = {"score": args.score}
     if args.small:
-        base = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0)
+        base = dict(base, Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0)
     result = {
         "benchmark": "env_throughput",
         "machine": {"processor": platform.processor() or platform.machine(),
