@@ -66,7 +66,7 @@ LABELS: MappingProxyType[str, str] = MappingProxyType({
     "keepout": "keep-out",
     "trace": "trace",
     "trace_before": "trace before reset",
-    "rod": "suspended rod (from above)",
+    "rod": "suspended rod",
     "contact": "contact point",
     "flow": "flow",
 })  # fmt: skip
@@ -301,7 +301,7 @@ def draw_top_view(
     pads: Sequence[Any] = (),
     keepouts: Sequence[Any] = (),
     extent: tuple[float, float, float, float] | None = None,
-    legend: bool = True,
+    legend: bool | str = True,
     scale_bar: bool = True,
     um_per_lvb: float | None = None,
     z_down: bool = False,
@@ -322,7 +322,9 @@ def draw_top_view(
     ``flow``            (fx, fz) in e_v/(mu H), an arrow at the contact point,
                         ``flow_scale`` L_vb per unit (:func:`flow_arrow_scale`)
     ``extent``          fixed (x0, x1, z0, z1) (:func:`top_view_extent`); None: fit
-    ``legend``          a legend below the axes (its place never moves)
+    ``legend``          a legend below the axes (its place never moves); ``"figure"``:
+                        at the bottom of the figure, for a figure of one top view with
+                        the constrained layout (:func:`agg_figure`)
     ``scale_bar``       a bar in L_vb, and in micrometres when ``um_per_lvb`` is given
     ``z_down``          z grows downwards, as in the rerun viewer's 2D view
     ==================  =============================================================
@@ -362,10 +364,12 @@ def draw_top_view(
     ax.set_ylabel("z (L_vb)" + (", down" if z_down else ""))
     if scale_bar:
         _scale_bar(ax, um_per_lvb)
-    if legend:
-        ax.legend(
-            loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize="small", frameon=False
-        )
+    ncol = 2 if ax.figure.get_figwidth() < _TWO_COLUMNS_BELOW else 3
+    style = {"ncol": ncol, "fontsize": "small", "frameon": False}
+    if legend == "figure":
+        ax.figure.legend(*ax.get_legend_handles_labels(), loc="outside lower center", **style)
+    elif legend:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), **style)
     return view
 
 
@@ -403,6 +407,7 @@ def top_view_image(
     (e.g. an env's ``render()``)."""
     fig = agg_figure(size)
     ax = fig.add_subplot()
+    kwargs.setdefault("legend", "figure")
     draw_top_view(ax, trace, target, **kwargs)
     if title:
         ax.set_title(title, fontsize="small")
@@ -429,8 +434,10 @@ class TopViewRenderer:
         self.fig = agg_figure(size)
         ax = self.fig.add_subplot()
         trace = kwargs.pop("trace", np.zeros((0, 2)))
+        kwargs.setdefault("legend", "figure")
         self.view = draw_top_view(ax, trace, extent=extent, **kwargs)
-        self.title = ax.set_title("", fontsize="small")
+        # room for a title of two lines: the layout is fixed when the background is kept
+        self.title = ax.set_title("\n", fontsize="small")
         self.view.freeze(self.title)
 
     def render(
@@ -448,21 +455,26 @@ class TopViewRenderer:
 
 
 #: Width (inches) of a top-view image: its dpi is width in pixels / this, so that the
-#: layout (fonts, legend, margins) is the same at every size.
+#: layout (fonts, legend, margins) is the same at every size from 640 pixels up; smaller
+#: images keep text legible down to MIN_IMAGE_WIDTH_INCHES (a legend in two columns).
 IMAGE_WIDTH_INCHES = 6.4
+MIN_IMAGE_WIDTH_INCHES = 4.0
+# Narrower figures (inches) get a legend in two columns instead of three.
+_TWO_COLUMNS_BELOW = 5.5
 
 
 def agg_figure(size: tuple[int, int]) -> Any:
-    """A figure of exactly ``size`` = (width, height) pixels on an Agg canvas, with room
-    below the axes for the legend; the same layout at every size."""
+    """A figure of exactly ``size`` = (width, height) pixels on an Agg canvas, with the
+    constrained layout (room for a figure legend, :func:`draw_top_view`'s
+    ``legend="figure"``); the same layout at every size from 640 pixels wide up."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     width, height = (int(v) for v in size)
     if width < 16 or height < 16:
         raise ValueError(f"size must be (width, height) of at least 16 pixels, got {size}")
-    dpi = width / IMAGE_WIDTH_INCHES
-    fig = Figure(figsize=(IMAGE_WIDTH_INCHES, height / dpi), dpi=dpi)
+    inches = min(IMAGE_WIDTH_INCHES, max(MIN_IMAGE_WIDTH_INCHES, width / 100.0))
+    dpi = width / inches
+    fig = Figure(figsize=(inches, height / dpi), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
-    fig.subplots_adjust(left=0.1, right=0.97, top=0.93, bottom=0.24)
     return fig

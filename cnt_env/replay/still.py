@@ -76,7 +76,11 @@ def render_top_view(
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     draw_top_view(
-        ax, extent=episode_extent(episode), z_down=True, **episode_view_kwargs(episode, i)
+        ax,
+        extent=episode_extent(episode),
+        z_down=True,
+        legend="figure",
+        **episode_view_kwargs(episode, i),
     )
     meta = episode.meta
     ax.set_title(
