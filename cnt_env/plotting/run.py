@@ -8,12 +8,14 @@ import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cnt_env.patterns import MeasureOptions, arc_length, fit_circle, uturns
 from cnt_env.plotting.topview import rgb01
+
+if TYPE_CHECKING:  # imported when used: patterns loads scipy.signal (~2 s)
+    from cnt_env.patterns import MeasureOptions
 
 __all__ = ["last_turn_circle", "plot_run", "uturn_markers"]
 
@@ -32,6 +34,8 @@ def last_turn_circle(trace: Any, radius: float) -> tuple[float, float, float] | 
     centres and radii is returned. None when ``radius`` is not finite or the
     trace is shorter than one turn.
     """
+    from cnt_env.patterns import arc_length, fit_circle
+
     if radius is None or not math.isfinite(radius) or radius <= 0.0:
         return None
     pts = np.asarray(trace, dtype=np.float64)
@@ -63,6 +67,8 @@ def uturn_markers(
     defaults, i.e. what ``cnt-sim run`` measured with. None when the trace is too
     short to measure.
     """
+    from cnt_env.patterns import MeasureOptions, uturns
+
     measurement = measurement or {}
     if measurement.get("substrate") != "stepped":
         return None
@@ -115,6 +121,8 @@ def plot_run(
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from cnt_env.patterns import arc_length
 
     trace = np.asarray(trace, dtype=np.float64)
     measurement = dict(measurement or {})

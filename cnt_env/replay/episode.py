@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from cnt_env.io import atomic_savez, to_jsonable
-from cnt_env.task.targets import polyline_length
 
 __all__ = [
     "APPLICATION_ID",
@@ -267,6 +266,8 @@ class Episode:
         events: list[tuple[str, str]] = []
         ret = sum(self.reward[1 : i + 1].tolist())  # in order, as the wrapper sums it
         if i == 0:
+            from cnt_env.task.targets import polyline_length  # (loads scipy.signal: lazily)
+
             name = self.meta.get("target", "?")
             length = polyline_length(self.target) if len(self.target) else math.nan
             events.append(reset_event(name, length))
