@@ -4,7 +4,9 @@
 * ``spaces``: the action map both ways and the vector observation's layout;
 * ``scoring``: the agreement score, incremental (env) and batch (constant-flow search);
 * ``raster``: the image observation and ``render()``;
-* ``targets``: target paths and their families, with the held-out set;
+* ``routes``: circuit routes (corridor, pads, keep-outs), their families and held-out set
+  (the default task, docs/task.md);
+* ``targets``: thin target polylines (the v0 task, ``score="thin"``) and polyline helpers;
 * ``settings``: validation of the env's keywords.
 
 ``CNTDepositEnv`` is imported lazily, so that ``import cnt_env`` stays light.
