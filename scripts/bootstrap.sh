@@ -11,14 +11,14 @@
 # rebuilt only when pyproject.toml or this script changes.
 #
 # Environment: PYTHON (interpreter to create the venv with), VENV (default
-# .venv), TORCH_REQ (default torch==2.13.0), EXTRAS (default dev,rerun: the demo writes
-# a rerun recording and the replay tests read one back).
+# .venv), TORCH_REQ (default torch==2.13.0), EXTRAS (default dev,rerun,video: the demo writes
+# a rerun recording and a video, and the replay tests read both back).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 VENV=${VENV:-.venv}
 TORCH_REQ=${TORCH_REQ:-torch==2.13.0}
-EXTRAS=${EXTRAS:-dev,rerun}
+EXTRAS=${EXTRAS:-dev,rerun,video}
 STAMP="$VENV/.installed"
 CUDA_PATTERN='^(nvidia|cuda)[-_]'
 
