@@ -23,9 +23,11 @@ Lengths are in L_vb (units.py). JSON has no NaN: non-finite floats are stored as
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
+import stat
 import tempfile
 import zipfile
 import zlib
@@ -40,8 +42,13 @@ from cnt_env.units import DimensionlessParams
 __all__ = [
     "TRACE_FORMAT",
     "TRACE_FORMAT_VERSION",
+    "OutputError",
+    "OutputSet",
     "TraceFileError",
+    "check_output_path",
+    "config_hash",
     "load_trace",
+    "package_version",
     "save_trace",
     "to_jsonable",
 ]
@@ -80,6 +87,25 @@ def to_jsonable(value: Any) -> Any:
         v = float(value)
         return v if math.isfinite(v) else None
     return value
+
+
+def config_hash(payload: Mapping[str, Any], length: int = 16) -> str:
+    """The one config hash: SHA-256 of ``payload`` as sorted JSON (:func:`to_jsonable`),
+    its first ``length`` hex digits."""
+    blob = json.dumps(to_jsonable(payload), sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:length]
+
+
+def package_version() -> str:
+    """The installed distribution's version, or the source tree's when not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cnt-env")
+    except PackageNotFoundError:
+        from cnt_env import __version__
+
+        return __version__
 
 
 def _dumps(value: Any) -> str:
@@ -265,4 +291,180 @@ def load_trace(path: str | os.PathLike[str]) -> dict[str, Any]:
         DimensionlessParams(**out["params"])
     except (TypeError, ValueError) as exc:
         raise TraceFileError(f"{path} has invalid params: {exc}") from exc
+    _check_entry_types(path, out)
+    return out
+
+
+# Types of the entries of ``config`` and ``stats`` that readers use (None: absent/NaN).
+_ENTRY_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
+    "config": {
+        "preset": (str,), "substrate": (str,), "drag_law": (str,), "sliding": (str,),
+        "contact_mode": (str,), "transient_length": (int, float), "deposit_length": (int, float),
+        "dt": (int, float), "seed": (int,), "si": (dict,),
+    },
+    "stats": {
+        "deposited_length": (int, float), "time": (int, float), "steps": (int,),
+        "newton_iterations": (int,), "wall_time_s": (int, float),
+    },
+}  # fmt: skip
+
+
+def _check_entry_types(path: Path, out: Mapping[str, Any]) -> None:
+    for entry, types in _ENTRY_TYPES.items():
+        for key, allowed in types.items():
+            value = out[entry].get(key)
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, allowed):
+                names = " or ".join("number" if t in (int, float) else t.__name__ for t in allowed)
+                raise TraceFileError(
+                    f"{path} is a damaged cnt_env trace: {entry}['{key}'] is "
+                    f"{type(value).__name__} {str(value)[:40]!r}, not a {names}."
+                )
+    transient = out["config"].get("transient_length")
+    if transient is not None and not (math.isfinite(transient) and transient >= 0):
+        raise TraceFileError(f"{path}: config['transient_length'] = {transient!r} is invalid.")
+
+
+# --------------------------------------------------------------------------- outputs
+
+#: Longest file name (one path component) an output may have, in bytes (POSIX NAME_MAX).
+MAX_NAME_BYTES = 255
+
+
+class OutputError(ValueError):
+    """An output path cannot be written safely (the message names the flag)."""
+
+
+def check_output_path(value: str | os.PathLike[str], flag: str) -> Path:
+    """``value`` as an output path, checked before any work: every component short enough,
+    not a symlink, a regular file or a new path (never a directory, device or FIFO),
+    its folder created and writable. Raises :class:`OutputError` naming ``flag``."""
+    text = os.fspath(value)
+    shown = text if len(text) <= 80 else text[:60] + "..." + text[-12:]
+    if not text or "\x00" in text:
+        raise OutputError(f"{flag}: give a file name, got {shown!r}")
+    path = Path(text)
+    for part in path.parts:
+        if len(os.fsencode(part)) > MAX_NAME_BYTES:
+            raise OutputError(
+                f"{flag} {shown}: a file or folder name is longer than {MAX_NAME_BYTES} bytes"
+            )
+    if path.is_symlink():
+        raise OutputError(
+            f"{flag} {shown} is a symbolic link; outputs are never written through links: "
+            "remove it or pass another name"
+        )
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise OutputError(f"{flag} {shown}: cannot check it: {exc.strerror or exc}") from exc
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        what = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise OutputError(
+            f"{flag} {shown} is {what} (a device, FIFO or socket is never replaced); "
+            "pass a file name"
+        )
+    parent = path.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(
+            f"{flag} {shown}: cannot create its directory: {exc.strerror or exc}"
+        ) from exc
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{flag} {shown}: its directory {parent} is not writable")
+    return path
+
+
+class OutputSet:
+    """The outputs of one command, written as a unit.
+
+    :meth:`add` checks a final path (:func:`check_output_path`, and that no two outputs
+    name one file) and returns a temporary path in the same folder for the writer;
+    :meth:`commit` moves every temporary into place (after checking each final path
+    again), :meth:`discard` removes them. An existing output is kept until the new ones
+    are complete; used as a context manager, an exception discards everything::
+
+        with OutputSet() as outputs:
+            tmp = outputs.add(path, "--out")
+            save_trace(tmp, ...)
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[Path, Path, str]] = []
+        self._finals: dict[Path, str] = {}
+
+    def check(self, path: str | os.PathLike[str], flag: str) -> Path:
+        """Check ``path`` as an output of this set without staging it yet."""
+        final = check_output_path(path, flag)
+        key = Path(os.path.abspath(final))
+        other = self._finals.get(key)
+        if other is not None:
+            raise OutputError(f"{flag} and {other} name the same file ({final})")
+        self._finals[key] = flag
+        return final
+
+    def add(self, path: str | os.PathLike[str], flag: str, *, checked: bool = False) -> Path:
+        """Stage ``path``; returns the temporary file to write it to."""
+        final = Path(path) if checked else self.check(path, flag)
+        suffix = "".join(final.suffixes[-1:])
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{final.name[:100]}.", suffix=f".part{suffix}", dir=final.parent
+        )
+        os.close(fd)
+        self._staged.append((Path(tmp), final, flag))
+        return Path(tmp)
+
+    def write_text(self, path: str | os.PathLike[str], flag: str, text: str) -> Path:
+        tmp = self.add(path, flag)
+        tmp.write_text(text)
+        return tmp
+
+    def commit(self) -> list[Path]:
+        """Move every staged file into place; returns the final paths."""
+        umask = os.umask(0)
+        os.umask(umask)
+        try:
+            for tmp, final, flag in self._staged:
+                check_output_path(final, flag)  # nothing swapped in meanwhile
+                os.chmod(tmp, 0o666 & ~umask)
+            for tmp, final, _ in self._staged:
+                os.replace(tmp, final)
+        except BaseException:
+            self.discard()
+            raise
+        done = [final for _, final, _ in self._staged]
+        self._staged = []
+        return done
+
+    def discard(self) -> None:
+        for tmp, _, _ in self._staged:
+            tmp.unlink(missing_ok=True)
+        self._staged = []
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.discard()
+
+
+def config_json_text(path: str | os.PathLike[str], resolved: Mapping[str, Any]) -> str:
+    """The resolved config saved next to an output ``path`` as ``<path>.json``
+    (docs/architecture.md rule 12)."""
+    body = json.dumps(to_jsonable({**resolved, "output": str(path)}), indent=2, allow_nan=False)
+    return body + "\n"
+
+
+def write_config_json(path: Path, resolved: Mapping[str, Any]) -> Path:
+    """Write :func:`config_json_text` to ``<path>.json`` atomically; returns that path."""
+    out = Path(f"{path}.json")
+    with OutputSet() as outputs:
+        outputs.write_text(out, "--out", config_json_text(path, resolved))
     return out

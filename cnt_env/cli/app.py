@@ -1,0 +1,206 @@
+"""The ``cnt-sim`` command line: ``main(argv=None)``, the parser, and ``replay``.
+
+``main`` is the console-script entry point (also ``python -m cnt_env``) and returns the
+exit code from the one table in :mod:`cnt_env.cli.common` (docs/cli.md). Every error is
+one line ``cnt-sim: error: <message>`` naming the flag or file; never a traceback.
+
+* ``cnt-sim run``, ``measure``, ``demo``: :mod:`cnt_env.cli.run` over :mod:`cnt_env.runs`.
+* ``cnt-sim sweep``: :mod:`cnt_env.cli.sweep` over :mod:`cnt_env.sweep`.
+* ``cnt-sim replay FILE --rrd OUT.rrd``: a saved trace or episode as a rerun recording
+  (:mod:`cnt_env.replay`; rerun is an optional extra).
+
+The simulator and matplotlib are imported only by the commands that need them, so
+``cnt-sim --version`` and argument errors are instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from cnt_env import units
+from cnt_env.cli import sweep as sweep_cli
+from cnt_env.cli.common import (
+    EXIT_FAILED,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_LIMIT,
+    EXIT_OK,
+    EXIT_USAGE,
+    PROG,
+    CliError,
+    package_version,
+    print_json,
+    require_rerun,
+)
+from cnt_env.cli.run import add_run_arguments, cmd_measure, cmd_run, stage_output
+from cnt_env.io import OutputError, OutputSet, TraceFileError, load_trace
+from cnt_env.presets import DEMO_DEPOSIT
+from cnt_env.runs import RunInputError, RunLimitError
+
+__all__ = ["build_parser", "main"]
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """A saved trace or episode as a rerun recording (the kind from its ``format``)."""
+    from cnt_env import replay
+    from cnt_env.io import TRACE_FORMAT
+
+    outputs = OutputSet()
+    rrd = stage_output(outputs, args.rrd, "--rrd")
+    assert rrd is not None
+    require_rerun()
+    try:
+        kind = replay.file_format(args.file)
+    except replay.EpisodeFileError as exc:
+        raise CliError(str(exc)) from exc
+    try:
+        with outputs:
+            tmp = outputs.add(rrd, "--rrd", checked=True)
+            if kind == replay.EPISODE_FORMAT:
+                rid = replay.record_episode(args.file, tmp, recording_id=args.recording_id)
+            elif kind == TRACE_FORMAT:
+                saved = load_trace(args.file)
+                rid = replay.record_simulation(saved, tmp, recording_id=args.recording_id)
+            else:
+                raise CliError(
+                    f"{args.file} is neither a cnt_env trace (`cnt-sim run --out`) nor a "
+                    f"cnt_env episode file (format {str(kind)[:80]!r})"
+                )
+    except (TraceFileError, replay.EpisodeFileError) as exc:
+        raise CliError(str(exc)) from exc
+    except OSError as exc:
+        raise CliError(f"cannot write {rrd}: {exc}", EXIT_FAILED) from exc
+    result = {"file": str(args.file), "kind": kind, "rrd": str(rrd), "recording_id": rid}
+    if args.json:
+        print_json(result)
+    else:
+        print(f"wrote {rrd} (recording {rid}, from the {kind} file {args.file}); "
+              f"open it with `rerun {rrd}`")  # fmt: skip
+    return EXIT_OK
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job (``make demo``): a short coil deposition with a figure."""
+    outdir = Path(args.outdir)
+    print(f"{PROG} {package_version()}: demo, {args.deposit:g} L_vb of coil deposition")
+    run_argv = ["run", "--preset", "coil", "--deposit", repr(args.deposit),
+                "--out", str(outdir / "coil.npz"), "--png", str(outdir / "coil.png")]  # fmt: skip
+    return main(run_argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Carbon-nanotube deposition simulator (discrete elastic rods).",
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    run = sub.add_parser(
+        "run",
+        help="run one deposition",
+        allow_abbrev=False,
+        description="Run one deposition and measure its trace.",
+    )
+    add_run_arguments(run)
+    run.set_defaults(func=cmd_run)
+
+    measure = sub.add_parser(
+        "measure",
+        help="measure a saved trace",
+        allow_abbrev=False,
+        description="Measure a trace saved by `cnt-sim run --out`.",
+    )
+    measure.add_argument("trace", help="trace file (.npz) written by `cnt-sim run --out`")
+    measure.add_argument(
+        "--transient",
+        type=float,
+        metavar="L",
+        help="start-up arc length dropped, L_vb (default: the run's)",
+    )
+    measure.add_argument("--png", metavar="FIG.png", help="plot the trace")
+    measure.add_argument(
+        "--json", action="store_true", help="print one JSON object on stdout and nothing else"
+    )
+    measure.set_defaults(func=cmd_measure)
+
+    replay = sub.add_parser(
+        "replay",
+        help="turn a saved trace or episode into a rerun recording",
+        allow_abbrev=False,
+        description="Write a rerun recording (.rrd) of a trace saved by `cnt-sim run --out` "
+        "or of an episode saved by cnt_env.replay.save_episode; open it with `rerun FILE.rrd`. "
+        'Needs the rerun extra: pip install -e ".[rerun]".',
+    )
+    replay.add_argument("file", help="trace.npz or episode.npz (told apart by their format)")
+    replay.add_argument("--rrd", required=True, metavar="OUT.rrd", help="recording to write")
+    replay.add_argument("--recording-id", default=None, help="default: the file's own")
+    replay.add_argument(
+        "--json", action="store_true", help="print one JSON object on stdout and nothing else"
+    )
+    replay.set_defaults(func=cmd_replay)
+
+    demo = sub.add_parser("demo", help="run the main job: a small coil deposition")
+    demo.add_argument(
+        "--deposit",
+        type=float,
+        default=DEMO_DEPOSIT,
+        metavar="LENGTH",
+        help=f"trace length, L_vb (default {DEMO_DEPOSIT:g})",
+    )
+    demo.add_argument("--outdir", default="runs/demo", help="output directory (runs/demo)")
+    demo.set_defaults(func=cmd_demo)
+
+    sweep_cli.add_parser(sub)
+    return parser
+
+
+def _error(message: str, code: int) -> int:
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``cnt-sim``; returns the process exit code (argparse's too)."""
+    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, usage errors
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    args.argv = argv
+    from cnt_env.sim.stepper import SimulationError
+    from cnt_env.sweep import SweepFailure
+
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        return _error(str(exc), exc.code)
+    except (RunInputError, OutputError, TraceFileError, units.ParameterError) as exc:
+        return _error(str(exc), EXIT_USAGE)
+    except RunLimitError as exc:
+        return _error(str(exc), EXIT_LIMIT)
+    except (SimulationError, SweepFailure) as exc:
+        return _error(str(exc), EXIT_FAILED)
+    except OSError as exc:
+        where = f" {exc.filename}" if exc.filename else ""
+        return _error(f"cannot read or write{where}: {exc.strerror or exc}", EXIT_FAILED)
+    except MemoryError:
+        return _error("out of memory; lower --max-nodes or --deposit", EXIT_FAILED)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:
+        if os.environ.get("CNT_SIM_TRACEBACK") == "1":
+            raise
+        text = " ".join(str(exc).split())[:300]
+        return _error(f"unexpected {type(exc).__name__}: {text} (a bug: please report it, "
+                      "with CNT_SIM_TRACEBACK=1 for the traceback)", EXIT_INTERNAL)  # fmt: skip
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

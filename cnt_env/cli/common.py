@@ -1,0 +1,226 @@
+"""What every ``cnt-sim`` subcommand shares: the error contract, the exit codes, output
+helpers and the flags common to ``run`` and ``sweep``.
+
+Exit codes (docs/cli.md), the one table every command uses:
+
+====  ====================  ==========================================================
+code  name                  meaning
+====  ====================  ==========================================================
+0     ``EXIT_OK``           success
+1     ``EXIT_FAILED``       a simulation or measurement failed, a sweep point failed,
+                            or an output could not be written
+2     ``EXIT_USAGE``        bad input: a flag, a parameter outside its range, an
+                            unreadable input file or an output path that cannot be
+                            written safely (found before any simulation work)
+3     ``EXIT_LIMIT``        a run was stopped by a limit (``--max-steps``,
+                            ``--max-wall-time``)
+70    ``EXIT_INTERNAL``     an unexpected error (a bug: please report it); still no
+                            traceback unless ``CNT_SIM_TRACEBACK=1``
+130   ``EXIT_INTERRUPTED``  Ctrl-C; outputs are left as they were
+====  ====================  ==========================================================
+
+Every error is one line on stderr, ``cnt-sim: error: <message>``, and the message names
+the flag or the input file concerned.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from typing import Any
+
+from cnt_env.io import package_version, to_jsonable
+from cnt_env.runs import CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
+
+PROG = "cnt-sim"
+DIST_NAME = "cnt-env"
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2  # argparse's code too
+EXIT_LIMIT = 3
+EXIT_INTERNAL = 70
+EXIT_INTERRUPTED = 130
+
+#: The exit-code table (code -> meaning), as in docs/cli.md.
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success",
+    EXIT_FAILED: "a simulation, measurement, sweep point or output write failed",
+    EXIT_USAGE: "bad input (flag, parameter, input file, output path)",
+    EXIT_LIMIT: "a run was stopped by a limit",
+    EXIT_INTERNAL: "unexpected error (a bug)",
+    EXIT_INTERRUPTED: "interrupted",
+}
+
+__all__ = [
+    "EXIT_CODES",
+    "EXIT_FAILED",
+    "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
+    "EXIT_LIMIT",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "PROG",
+    "CliError",
+    "add_group_arguments",
+    "add_limit_arguments",
+    "add_model_arguments",
+    "package_version",
+    "print_json",
+    "progress_bar",
+    "require_rerun",
+    "warn",
+]
+
+
+class CliError(Exception):
+    """Reported as ``cnt-sim: error: <message>`` with exit code ``code``."""
+
+    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def require_rerun() -> None:
+    """Fail before any work when the optional rerun extra is missing."""
+    from cnt_env.replay import import_rerun
+
+    try:
+        import_rerun()
+    except ImportError as exc:
+        raise CliError(str(exc), EXIT_FAILED) from exc
+
+
+def warn(message: str) -> None:
+    print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+
+def print_json(result: Mapping[str, Any]) -> None:
+    print(json.dumps(to_jsonable(result), allow_nan=False))
+
+
+@contextmanager
+def progress_bar(enabled: bool, total: float, min_interval: float = 0.1) -> Iterator[Any]:
+    """A ``progress(done, total)`` callback drawing a tqdm bar on stderr, or None.
+
+    The simulator calls it after every step (tens of thousands per run), so the bar
+    is refreshed at most every ``min_interval`` seconds.
+    """
+    if not enabled:
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=total,
+        file=sys.stderr,
+        desc="depositing",
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} L_vb "
+        "[{elapsed}<{remaining}]",
+    )
+    last = -math.inf
+
+    def update(done: float, total: float) -> None:
+        nonlocal last
+        now = time.monotonic()
+        if now - last >= min_interval or done >= total:
+            bar.n = done
+            bar.refresh()
+            last = now
+
+    try:
+        yield update
+    finally:
+        bar.close()
+
+
+ProgressCallback = Callable[[float, float], None]
+
+
+# --------------------------------------------------------------------------- flags
+
+
+def add_group_arguments(g: Any) -> None:
+    """The dimensionless-group flags shared by ``run`` and ``sweep`` (runs.GROUP_FIELDS)."""
+    g.add_argument("--Hbar", type=float, help="rod height H / L_vb")
+    g.add_argument("--Ibar", type=float, help="mass per length rho e_v^2 / (k_b mu^2)")
+    g.add_argument("--vbar", type=float, help="flow speed v mu H / e_v (>= 0)")
+    g.add_argument("--phi", type=float, help="flow direction in the x-z plane from +x [rad]")
+    g.add_argument(
+        "--kappa-c",
+        dest="kappa_c",
+        type=float,
+        help="critical curvature kappa_c L_vb (stepped substrate)",
+    )
+    g.add_argument(
+        "--delta",
+        type=float,
+        help="discretisation length delta / L_vb (default: the preset's validated mesh, "
+        "coil 0.125 graded to 1, serpentine 1)",
+    )
+    g.add_argument(
+        "--dt",
+        type=float,
+        help="time step in mu L_vb^2 / e_v (default: DepositionConfig.dt_factor Hbar)",
+    )
+
+
+def add_model_arguments(m: Any) -> None:
+    """The model and solver flags shared by ``run`` and ``sweep`` (see runs.resolve)."""
+    m.add_argument("--drag-law", choices=DRAG_LAWS, default="linear")
+    m.add_argument(
+        "--sliding",
+        choices=SLIDING_OPTIONS,
+        default="B",
+        help="stepped substrate: B fixed in x, C free in x until snapped",
+    )
+    m.add_argument(
+        "--coarse-delta",
+        type=float,
+        default=None,
+        help="graded mesh: inject edges of this length, split near the contact",
+    )
+    m.add_argument(
+        "--fine-length",
+        type=float,
+        default=20.0,
+        help="graded mesh: arc length above the contact kept at --delta",
+    )
+    m.add_argument("--contact-mode", choices=CONTACT_MODES, default="event")
+    m.add_argument(
+        "--initial-radius",
+        type=float,
+        metavar="R",
+        help="radius of the start-up contact arc, L_vb (default: 6.4 flat, 3.9 stepped)",
+    )
+
+
+def add_limit_arguments(g: Any) -> None:
+    """The named limits of a run (runs.Limits), shared by ``run`` and ``sweep``."""
+    d = Limits()
+    g.add_argument(
+        "--max-nodes",
+        type=int,
+        default=d.max_nodes,
+        metavar="N",
+        help=f"nodes in a simulation, start-up rod plus trace (default {d.max_nodes})",
+    )
+    g.add_argument(
+        "--max-steps",
+        type=int,
+        default=d.max_steps_per_length,
+        metavar="N",
+        help="physics steps allowed while less than 1 L_vb is deposited "
+        f"(default {d.max_steps_per_length})",
+    )
+    g.add_argument(
+        "--max-wall-time",
+        type=float,
+        default=None,
+        metavar="S",
+        help="wall time of one run in seconds (default: none)",
+    )
