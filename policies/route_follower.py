@@ -13,9 +13,9 @@ mean is that centre), toward a point ``lookahead`` L_vb ahead on the route:
   centre;
 * the flow points from the centre to the aim, plus ``gain`` times the centre's offset
   across the route (back toward the route's line, which the drift alone corrects slowly);
-* a keep-out closer to the centre than the band's half-width plus ``clearance`` pushes
-  the aim away from it, ``repulsion`` per L_vb of intrusion (the observation's ``route``
-  slice holds the nearest keep-out point);
+* a keep-out closer to the centre, or to the aim, than the band's half-width plus
+  ``clearance`` pushes the aim away from it, ``repulsion`` per L_vb of intrusion (the
+  observation's ``route`` slice holds the nearest keep-out point);
 * the speed: the fastest flow whose band fits the corridor (the amplitude curve
   ``policies/data/amplitude_curve.json``: A = 14 L_vb at v̄ = 0.13, 17 at 0.1, ...),
   v̄_max when none fits (the narrowest band). With the measured curve that is v̄_max for
@@ -102,12 +102,16 @@ class RouteFollower:
             across = (centre - ahead[j0]) @ np.array([-t[1], t[0]])
             aim = aim - self.gain * across * np.array([-t[1], t[0]])
         vbar = self.speed_for(width)
-        # keep the band (half-width A(v̄) around the centre) off the nearest keep-out
-        away = centre - keep
-        dist = math.hypot(*away)
+        # keep the band (half-width A(v̄) around the centre) off the nearest keep-out,
+        # by where the centre is and where it is heading (the aim), whichever is closer
         reach = float(np.interp(vbar, self._v, self._a)) + self.clearance
-        if 1e-9 < dist < reach:
-            aim = aim + self.repulsion * (reach - dist) * away / dist
+        intrusion, push = 0.0, np.zeros(2)
+        for p in (centre, centre + aim):
+            away = p - keep
+            dist = math.hypot(*away)
+            if 1e-9 < dist < reach and reach - dist > intrusion:
+                intrusion, push = reach - dist, away / dist
+        aim = aim + self.repulsion * intrusion * push
         if math.hypot(*aim) < 1e-9:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])
