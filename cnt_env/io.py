@@ -410,13 +410,26 @@ class OutputSet:
     def add(self, path: str | os.PathLike[str], flag: str, *, checked: bool = False) -> Path:
         """Stage ``path``; returns the temporary file to write it to."""
         final = Path(path) if checked else self.check(path, flag)
-        suffix = "".join(final.suffixes[-1:])
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{final.name[:100]}.", suffix=f".part{suffix}", dir=final.parent
-        )
+        suffix = "".join(final.suffixes[-1:])[:20]
+        try:
+            fd, tmp = tempfile.mkstemp(
+                prefix=f".{final.name[:100]}.", suffix=f".part{suffix}", dir=final.parent
+            )
+        except OSError as exc:
+            raise OutputError(
+                f"{flag} {final}: cannot write in {final.parent}: {exc.strerror or exc}"
+            ) from exc
         os.close(fd)
         self._staged.append((Path(tmp), final, flag))
         return Path(tmp)
+
+    def temp_for(self, path: str | os.PathLike[str]) -> Path:
+        """The temporary file staged for ``path`` (KeyError when not staged)."""
+        final = Path(path)
+        for tmp, staged, _ in self._staged:
+            if staged == final:
+                return tmp
+        raise KeyError(str(path))
 
     def write_text(self, path: str | os.PathLike[str], flag: str, text: str) -> Path:
         tmp = self.add(path, flag)

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import cnt_env.runs
 import cnt_env.sim.deposition
 from cnt_env import cli, units
-from cnt_env.io import TraceFileError, load_trace, save_trace, to_jsonable
+from cnt_env.io import load_trace
 
 REPO = Path(__file__).resolve().parents[1]
 RUN_KEYS = {
@@ -235,48 +236,6 @@ def test_measure_a_trace_too_short_for_the_transient(tiny_run: dict) -> None:
     assert "too short" in stderr
 
 
-# --------------------------------------------------------------------------- io
-
-
-def test_trace_file_rejects_bad_contents(tmp_path: Path) -> None:
-    params = units.paper_groups("coil")
-    with pytest.raises(ValueError, match="NaN"):
-        save_trace(tmp_path / "x.npz", np.full((3, 3), np.nan), params, {}, {})
-    with pytest.raises(ValueError, match="shape"):
-        save_trace(tmp_path / "x.npz", np.zeros((3, 2)), params, {}, {})
-    damaged = tmp_path / "damaged.npz"
-    np.savez(damaged, format=np.array("cnt_env.trace"), format_version=np.array(1))
-    with pytest.raises(TraceFileError, match="missing"):
-        load_trace(damaged)
-    newer = tmp_path / "newer.npz"
-    save_trace(newer, np.zeros((3, 3)), params, {}, {})
-    with np.load(newer) as npz:
-        entries = dict(npz)
-    entries["format_version"] = np.array(2)
-    np.savez(newer, **entries)
-    with pytest.raises(TraceFileError, match="upgrade"):
-        load_trace(newer)
-
-
-def test_trace_file_round_trip(tmp_path: Path) -> None:
-    path = tmp_path / "no_suffix"
-    trace = np.arange(12.0).reshape(4, 3)
-    params = units.paper_groups("coil")
-    save_trace(path, trace, params, {"seed": 3}, {"steps": np.int64(7), "x": np.nan})
-    assert path.exists()  # no .npz appended
-    saved = load_trace(path)
-    np.testing.assert_array_equal(saved["trace"], trace)
-    assert saved["suspended"] is None
-    assert units.DimensionlessParams(**saved["params"]) == params
-    assert saved["config"] == {"seed": 3} and saved["stats"] == {"steps": 7, "x": None}
-
-
-def test_to_jsonable_makes_valid_json() -> None:
-    value = {"a": np.float64("nan"), "b": (np.int32(2), np.inf), "c": np.array([1.0, np.nan])}
-    assert to_jsonable(value) == {"a": None, "b": [2, None], "c": [1.0, None]}
-    json.dumps(to_jsonable(value), allow_nan=False)
-
-
 def test_progress_bar_draws_on_stderr(capsys: pytest.CaptureFixture[str]) -> None:
     with cli.progress_bar(True, 10.0) as update:
         for done in (2.5, 5.0, 10.0):
@@ -310,3 +269,130 @@ def test_usage_errors_return_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["run", "--drag-law", "nonsense"]) == 2
     assert "invalid choice" in capsys.readouterr().err
     assert cli.main([]) == 2
+
+
+# --------------------------------------------------------------------------- hostile input
+# (issue 14: outputs that must not destroy what is not the user's result, inputs that must
+# not run forever, and clear errors instead of tracebacks; the exit codes of docs/cli.md)
+
+
+def _assert_clean_error(code: int, stdout: str, stderr: str, expected: int, *names: str) -> None:
+    assert code == expected, stderr
+    assert stdout == ""
+    assert stderr.startswith("cnt-sim: error: ") and "Traceback" not in stderr
+    assert len(stderr.splitlines()) == 1
+    for name in names:
+        assert name in stderr
+
+
+@pytest.mark.parametrize("device", ["/dev/full", "/dev/null"])
+def test_run_never_replaces_a_device(device: str, no_simulation: None) -> None:
+    """Defect 2: a device is not a regular file; nothing runs, nothing is replaced."""
+    before = os.stat(device)
+    code, stdout, stderr = _call(["run", *TINY, "--json", "--out", device])
+    _assert_clean_error(code, stdout, stderr, 2, "--out", "not a regular file")
+    after = os.stat(device)
+    assert (after.st_ino, after.st_rdev) == (before.st_ino, before.st_rdev)
+
+
+def test_run_never_replaces_a_fifo(tmp_path: Path, no_simulation: None) -> None:
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    code, stdout, stderr = _call(["run", *TINY, "--png", str(fifo)])
+    _assert_clean_error(code, stdout, stderr, 2, "--png", "not a regular file")
+    assert fifo.is_fifo()
+
+
+def test_run_never_writes_through_a_symlink(tmp_path: Path, no_simulation: None) -> None:
+    """Defect 3: a symlink at <out>.json is refused before any work; its target is kept."""
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    out = tmp_path / "trace.npz"
+    Path(f"{out}.json").symlink_to(target)
+    code, stdout, stderr = _call(["run", *TINY, "--out", str(out)])
+    _assert_clean_error(code, stdout, stderr, 2, "--out", "symbolic link")
+    assert target.read_text() == "keep me" and not out.exists()
+
+
+def test_run_outputs_are_checked_as_a_unit(tmp_path: Path, no_simulation: None) -> None:
+    """Defect 5: <out>.json a directory, or --png naming the trace's config, fails before
+    any work and leaves the existing trace as it was."""
+    out = tmp_path / "a"
+    out.write_bytes(b"old trace")
+    Path(f"{out}.json").mkdir()
+    code, stdout, stderr = _call(["run", *TINY, "--out", str(out)])
+    _assert_clean_error(code, stdout, stderr, 2, "--out", "directory")
+    assert out.read_bytes() == b"old trace"
+    Path(f"{out}.json").rmdir()
+    code, stdout, stderr = _call(["run", *TINY, "--out", str(out), "--png", f"{out}.json"])
+    _assert_clean_error(code, stdout, stderr, 2, "same file")
+    assert out.read_bytes() == b"old trace" and not Path(f"{out}.json").exists()
+
+
+def test_a_failed_run_keeps_the_old_outputs(tmp_path: Path, monkeypatch) -> None:
+    """Defect 5: a run that fails after its outputs were checked writes none of them."""
+    from cnt_env.sim.stepper import SimulationError
+
+    def failing(*args: object, **kwargs: object) -> None:
+        raise SimulationError("Newton did not converge", 3, 1.0, 0.1, {})
+
+    monkeypatch.setattr(cnt_env.runs, "deposit", failing)
+    out, png = tmp_path / "t.npz", tmp_path / "t.png"
+    out.write_bytes(b"old")
+    code, stdout, stderr = _call(["run", *TINY, "--out", str(out), "--png", str(png)])
+    _assert_clean_error(code, stdout, stderr, 1, "Newton")
+    assert out.read_bytes() == b"old" and not png.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.npz"]  # no temporaries
+
+
+@pytest.mark.parametrize(
+    ("args", "names"),
+    [
+        (["--Hbar", "1e300"], ["--Hbar", "meaningful range"]),  # defect 6
+        (["--delta", "1e-9"], ["--delta"]),
+        (["--deposit", "1e12"], ["--max-nodes"]),
+        (["--Ibar", "1e300"], ["--Ibar", "meaningful range"]),  # defect 7
+        (["--kappa-c", "0"], ["--kappa-c"]),  # defect 9
+        (["--substrate", "flat", "--kappa-c", "0.2"], ["--kappa-c", "--substrate flat"]),
+        (["--max-nodes", "0"], ["--max-nodes"]),
+        (["--max-steps", "0"], ["--max-steps"]),
+        (["--max-wall-time", "-1"], ["--max-wall-time"]),
+        (["--out", "x" * 300], ["--out", "longer than 255"]),  # defect 13
+        (["--out", "/proc/x/y.npz"], ["--out"]),
+    ],
+)
+def test_hostile_run_input_is_a_clear_error(
+    args: list[str], names: list[str], no_simulation: None
+) -> None:
+    code, stdout, stderr = _call(["run", *TINY, "--json", *args])
+    _assert_clean_error(code, stdout, stderr, 2, *names)
+
+
+def test_a_run_that_makes_no_progress_stops_at_the_step_limit() -> None:
+    """Defect 7: physics steps without deposited length stop with exit 3."""
+    code, stdout, stderr = _call(["run", *TINY, "--json", "--max-steps", "2"])
+    _assert_clean_error(code, stdout, stderr, 3, "--max-steps", "no progress")
+
+
+def test_a_run_stops_at_the_wall_time_limit() -> None:
+    code, stdout, stderr = _call(["run", *TINY, "--json", "--max-wall-time", "1e-6"])
+    _assert_clean_error(code, stdout, stderr, 3, "--max-wall-time")
+
+
+def test_measure_rejects_a_long_png_name_and_a_bad_trace(tiny_run: dict, tmp_path: Path) -> None:
+    """Defect 13: a 300-character output name, a trace whose stats have the wrong type."""
+    code, stdout, stderr = _call(["measure", str(tiny_run["out"]), "--png", "p" * 300])
+    _assert_clean_error(code, stdout, stderr, 2, "--png")
+    with np.load(tiny_run["out"]) as npz:
+        entries = dict(npz)
+    entries["stats"] = np.array(json.dumps({"steps": "many"}))
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **entries)
+    code, stdout, stderr = _call(["measure", str(bad), "--json"])
+    _assert_clean_error(code, stdout, stderr, 2, "steps")
+
+
+def test_exit_code_table_is_documented() -> None:
+    text = (REPO / "docs" / "cli.md").read_text()
+    for code in cli.EXIT_CODES:
+        assert f"| {code} " in text

@@ -11,6 +11,7 @@ import contextlib
 import io
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -253,3 +254,108 @@ def test_stepped_run_figure_marks_the_uturns(tmp_path: Path) -> None:
     assert uturn_markers(trace, {**measurement, "substrate": "flat"}) is None
     png = plot_run(trace, None, measurement, tmp_path / "meander.png")
     assert png.read_bytes()[:8] == PNG_MAGIC
+
+
+# --------------------------------------------------------------------------- hostile input
+# (issue 14: sweep size, FIFO and /proc outputs, damaged CSVs; docs/cli.md)
+
+
+@pytest.fixture
+def fake_points(monkeypatch: pytest.MonkeyPatch) -> list:
+    """``run_point`` without a simulation: a row with a pattern, recorded in order."""
+    calls: list = []
+
+    def fake(point: sweep.SweepPoint) -> dict:
+        calls.append(dict(point.values))
+        row = {name: math.nan for name in sweep.RESULT_COLUMNS}
+        row.update(dict(point.values), seed=point.seed, pattern="coil", failure="")
+        row.update(config_hash=point.config_hash, wall_time_s=0.0)
+        return row
+
+    monkeypatch.setattr(sweep, "run_point", fake)
+    return calls
+
+
+def _clean(code: int, stdout: str, stderr: str, expected: int, *names: str) -> None:
+    assert code == expected, stderr
+    assert stdout == "" and "Traceback" not in stderr
+    assert stderr.startswith("cnt-sim: error: ")
+    for name in names:
+        assert name in stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "names"),
+    [
+        (["--param", "Ibar", "--values", "1", "--repeats", "100000000"], ["--max-points"]),
+        (["--param", "Ibar", "--range", "1:2:100000000"], ["--range", "--max-points"]),
+        (["--param", "Ibar", "--values", "1,2", "--max-points", "1"], ["--max-points"]),
+        (["--param", "Ibar", "--values", "100", "--kappa-c", "0"], ["--kappa-c"]),
+        (["--param", "kappa-c", "--values", "0"], ["--kappa-c"]),
+        (["--param", "Ibar", "--values", "1e300"], ["--Ibar", "meaningful range"]),
+    ],
+)
+def test_hostile_sweep_input_is_a_clear_error(
+    args: list[str], names: list[str], tmp_path: Path, fake_points: list
+) -> None:
+    """Defects 8, 9: a huge sweep and kappa_c = 0 are refused before any point runs."""
+    out = tmp_path / "s.csv"
+    code, stdout, stderr = _call(["sweep", *TINY, *args, "--out", str(out), "--json"])
+    _clean(code, stdout, stderr, 2, *names)
+    assert fake_points == [] and not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "proc", "long", "symlink"])
+def test_sweep_out_must_be_a_writable_regular_file(
+    kind: str, tmp_path: Path, fake_points: list
+) -> None:
+    """Defects 8, 13: --out on a FIFO does not hang; /proc and long names are errors."""
+    target = tmp_path / "target.csv"
+    target.write_text("keep")
+    out = {
+        "fifo": tmp_path / "fifo.csv",
+        "proc": Path("/proc/x.csv"),
+        "long": tmp_path / ("s" * 300),
+        "symlink": tmp_path / "link.csv",
+    }[kind]
+    if kind == "fifo":
+        os.mkfifo(out)
+    if kind == "symlink":
+        out.symlink_to(target)
+    grid = ["--param", "Ibar", "--values", "100"]
+    code, stdout, stderr = _call(["sweep", *TINY, *grid, "--out", str(out), "--json"])
+    _clean(code, stdout, stderr, 2, "--out")
+    assert fake_points == [] and target.read_text() == "keep"
+
+
+def test_sweep_csv_with_an_unclosed_quote_resumes_once(tmp_path: Path, fake_points: list) -> None:
+    """Defect 12: a last row ending in an unclosed quote is cut off; the point runs once
+    and its row is read back, so the next resume runs nothing."""
+    out = tmp_path / "s.csv"
+    argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100,200", "--out", str(out)]
+    assert _call([*argv, "--json", "--no-plots"])[0] == 0
+    lines = out.read_text().splitlines(keepends=True)
+    out.write_text("".join(lines[:-1]) + '200.0,0,"coil')  # the last row cut in a quote
+    assert len(sweep.read_rows(out)[1]) == 1
+    fake_points.clear()
+    code, _, stderr = _call([*argv, "--json", "--no-plots"])
+    assert code == 0, stderr
+    assert fake_points == [{"Ibar": 200.0}]
+    assert len(sweep.read_rows(out)[1]) == 2
+    fake_points.clear()
+    assert _call([*argv, "--json", "--no-plots"])[0] == 0
+    assert fake_points == []
+
+
+def test_sweep_csv_with_random_bytes_is_a_clear_error(tmp_path: Path, fake_points: list) -> None:
+    """Defect 12: random bytes appended to the CSV: exit 2 naming --out, file unchanged."""
+    out = tmp_path / "s.csv"
+    argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100", "--out", str(out), "--json"]
+    assert _call([*argv, "--no-plots"])[0] == 0
+    with out.open("ab") as f:
+        f.write(np.random.default_rng(1).bytes(64) + b"\xff\xfe")
+    before = out.read_bytes()
+    fake_points.clear()
+    code, stdout, stderr = _call([*argv, "--no-plots"])
+    _clean(code, stdout, stderr, 2, "--out", "UTF-8")
+    assert fake_points == [] and out.read_bytes() == before

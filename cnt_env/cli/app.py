@@ -36,7 +36,7 @@ from cnt_env.cli.common import (
     print_json,
     require_rerun,
 )
-from cnt_env.cli.run import add_run_arguments, cmd_measure, cmd_run, stage_output
+from cnt_env.cli.run import add_run_arguments, cmd_measure, cmd_run
 from cnt_env.io import OutputError, OutputSet, TraceFileError, load_trace
 from cnt_env.presets import DEMO_DEPOSIT
 from cnt_env.runs import RunInputError, RunLimitError
@@ -50,8 +50,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from cnt_env.io import TRACE_FORMAT
 
     outputs = OutputSet()
-    rrd = stage_output(outputs, args.rrd, "--rrd")
-    assert rrd is not None
+    rrd = outputs.check(args.rrd, "--rrd")
+    outputs.check(f"{rrd}.json", "--rrd")
     require_rerun()
     try:
         kind = replay.file_format(args.file)

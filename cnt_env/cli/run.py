@@ -108,27 +108,36 @@ def format_summary(result: Mapping[str, Any], written: Sequence[Path] = ()) -> s
 
 
 def stage_output(outputs: OutputSet, value: str | None, flag: str) -> Path | None:
-    """Check an output and its ``<file>.json`` before any work (None: not asked for)."""
+    """Check an output and its ``<file>.json`` and stage both (temporary files in their
+    folder) before any work; None when not asked for."""
     if value is None:
         return None
     path = outputs.check(value, flag)
     outputs.check(f"{path}.json", flag)
+    outputs.add(path, flag, checked=True)
+    outputs.add(f"{path}.json", flag, checked=True)
     return path
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    spec = runs.resolve(run_options(args), warn=warn)
     outputs = OutputSet()
+    try:
+        return _run(args, outputs)
+    finally:
+        outputs.discard()  # after a commit: nothing left to discard
+
+
+def _run(args: argparse.Namespace, outputs: OutputSet) -> int:
+    spec = runs.resolve(run_options(args), warn=warn)
     out = stage_output(outputs, args.out, "--out")
     png = stage_output(outputs, args.png, "--png")
     rrd = stage_output(outputs, getattr(args, "rrd", None), "--rrd")
     runner = None
-    rrd_tmp = None
     if rrd is not None:
         from cnt_env.replay import record_run
 
         require_rerun()
-        rrd_tmp = outputs.add(rrd, "--rrd", checked=True)
+        rrd_tmp = outputs.temp_for(rrd)
 
         def runner(config, length, seed, progress):  # the same run, recorded as it goes
             return record_run(config, length, rrd_tmp, seed=seed, progress=progress,
@@ -141,11 +150,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         with progress_bar(show_bar, spec.deposit_length) as progress:
             result = runs.simulate(spec, progress, runner=runner)
     except SimulationError as exc:
-        outputs.discard()
         raise CliError(str(exc), EXIT_FAILED) from exc
-    except BaseException:
-        outputs.discard()
-        raise
     measurement = result.measurement
     if measurement.get("error"):
         warn(f"trace not measured: {measurement['error']}")
@@ -157,7 +162,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     written = []
     try:
         if out is not None:
-            tmp = outputs.add(out, "--out", checked=True)
+            tmp = outputs.temp_for(out)
             save_trace(tmp, result.trace, params, config, result.stats, result.suspended,
                        version=report["version"])  # fmt: skip
             written.append(out)
@@ -165,20 +170,15 @@ def cmd_run(args: argparse.Namespace) -> int:
             from cnt_env.plotting import plot_run
 
             plot_run(result.trace, result.suspended, measurement,
-                     outputs.add(png, "--png", checked=True))  # fmt: skip
+                     outputs.temp_for(png))  # fmt: skip
             written.append(png)
         if rrd is not None:  # written by record_run
             written.append(rrd)
         for path in written:
-            tmp = outputs.add(f"{path}.json", "--out", checked=True)
-            tmp.write_text(config_json_text(path, resolved))
+            outputs.temp_for(f"{path}.json").write_text(config_json_text(path, resolved))
         outputs.commit()
     except OSError as exc:
-        outputs.discard()
         raise CliError(f"cannot write output: {exc}", EXIT_FAILED) from exc
-    except BaseException:
-        outputs.discard()
-        raise
 
     if args.json:
         print_json(report)
@@ -189,6 +189,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_measure(args: argparse.Namespace) -> int:
     outputs = OutputSet()
+    try:
+        return _measure(args, outputs)
+    finally:
+        outputs.discard()  # after a commit: nothing left to discard
+
+
+def _measure(args: argparse.Namespace, outputs: OutputSet) -> int:
     png = stage_output(outputs, args.png, "--png")
     try:
         saved = load_trace(args.trace)
@@ -217,9 +224,8 @@ def cmd_measure(args: argparse.Namespace) -> int:
         try:
             with outputs:
                 plot_run(saved["trace"], saved["suspended"], measurement,
-                         outputs.add(png, "--png", checked=True))  # fmt: skip
-                tmp = outputs.add(f"{png}.json", "--png", checked=True)
-                tmp.write_text(config_json_text(png, resolved))
+                         outputs.temp_for(png))  # fmt: skip
+                outputs.temp_for(f"{png}.json").write_text(config_json_text(png, resolved))
         except OSError as exc:
             raise CliError(f"cannot write output: {exc}", EXIT_FAILED) from exc
         written.append(png)
