@@ -25,13 +25,27 @@ from pathlib import Path
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
-DEFAULTS = {
-    "coil": {"delta_bar": 0.125, "coarse_delta": 1.0, "dt_factor": 0.05, "initial_radius": 6.4,
-             "drag_law": "linear"},
-    "serpentine": {"delta_bar": 1.0, "coarse_delta": None, "dt_factor": 0.05,
-                   "initial_radius": 3.9, "drag_law": "linear", "sliding": "B", "phi": 0.0,
-                   "kappa_c_bar": 0.2, "tail_length": 195.0},
-}  # fmt: skip
+
+def _suite_defaults() -> dict[str, dict]:
+    """Each suite's validated configuration: the preset's mesh and start-up arc
+    (cnt_env.presets), the simulator's own defaults (DepositionConfig), and for the
+    serpentine the paper's kappa_c; no value is copied here."""
+    import dataclasses
+
+    from cnt_env.presets import DEFAULT_KAPPA_C, MESH
+    from cnt_env.sim.deposition import DepositionConfig
+
+    sim = {f.name: f.default for f in dataclasses.fields(DepositionConfig)}
+    base = {"dt_factor": sim["dt_factor"], "drag_law": sim["drag_law"]}
+    out = {}
+    for suite in ("coil", "serpentine"):
+        mesh = MESH[suite]
+        out[suite] = {"delta_bar": mesh["delta_bar"], "coarse_delta": mesh["coarse_delta"],
+                      **base, "initial_radius": mesh["initial_radius"]}  # fmt: skip
+    out["serpentine"].update(sliding=sim["sliding"], phi=0.0, kappa_c_bar=DEFAULT_KAPPA_C,
+                             tail_length=sim["tail_length"])  # fmt: skip
+    return out
+
 
 SERPENTINE_CASES: dict[str, dict] = {
     "default": {},
@@ -47,7 +61,7 @@ SERPENTINE_CASES: dict[str, dict] = {
     "env_fast": {"dt_factor": 0.2, "tail_length": 60.0},
 }
 
-# name -> overrides of DEFAULTS["coil"]
+# name -> overrides of the coil suite's defaults (_suite_defaults)
 COIL_CASES: dict[str, dict] = {
     "default": {},
     "delta_1": {"delta_bar": 1.0, "coarse_delta": None},
@@ -70,7 +84,7 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     from cnt_env.sim.deposition import DepositionConfig, DepositionSim
     from cnt_env.units import paper_groups
 
-    c = {**DEFAULTS[suite], **CASES[suite][name]}
+    c = {**_suite_defaults()[suite], **CASES[suite][name]}
     groups = {"delta_bar": c["delta_bar"]}
     extra = {}
     if suite == "serpentine":
