@@ -124,13 +124,14 @@ class Limits:
     max_wall_time: float | None = None
 
     def __post_init__(self) -> None:
-        for name, flag in (("max_nodes", "--max-nodes"), ("max_steps_per_length", "--max-steps")):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise RunInputError(f"{flag} must be an integer >= 1, got {v!r}")
-        w = self.max_wall_time
-        if w is not None and not (isinstance(w, (int, float)) and math.isfinite(w) and w > 0):
-            raise RunInputError(f"--max-wall-time must be a finite time > 0 in s, got {w!r}")
+        try:
+            units.check_int("--max-nodes", self.max_nodes, low=1)
+            units.check_int("--max-steps", self.max_steps_per_length, low=1)
+            if self.max_wall_time is not None:
+                units.check_number("--max-wall-time", self.max_wall_time, low=0.0,
+                                   low_open=True, unit="s")  # fmt: skip
+        except units.ParameterError as exc:
+            raise RunInputError(str(exc)) from exc
 
 
 def invalid(exc: Exception) -> RunInputError:
@@ -330,10 +331,12 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         raise invalid(exc) from exc
 
     length = RUN_DEPOSIT[opts.preset] if opts.deposit is None else opts.deposit
-    if not (isinstance(length, (int, float)) and math.isfinite(length) and length > 0.0):
-        raise RunInputError(f"--deposit must be a finite trace length > 0 in L_vb, got {length!r}")
-    if isinstance(opts.seed, bool) or not isinstance(opts.seed, int) or opts.seed < 0:
-        raise RunInputError(f"--seed must be >= 0, got {opts.seed}")
+    try:
+        length = units.check_number("--deposit", length, low=0.0, low_open=True,
+                                    unit="(trace length in L_vb)")  # fmt: skip
+        units.check_int("--seed", opts.seed, low=0)
+    except units.ParameterError as exc:
+        raise RunInputError(str(exc)) from exc
     transient = RUN_TRANSIENT[opts.preset] if opts.transient is None else opts.transient
     measure_options = measure_options_for(transient)
 

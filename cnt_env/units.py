@@ -40,6 +40,8 @@ __all__ = [
     "DimensionlessParams",
     "ParameterError",
     "PhysicalParams",
+    "check_int",
+    "check_number",
     "preset",
 ]
 
@@ -102,6 +104,38 @@ def _check_non_negative(owner: str, name: str, value: Any, unit: str, hint: str)
     if value < 0.0:
         raise ParameterError(f"{owner}.{name} = {value!r} must not be negative ({unit}); {hint}.")
     return value
+
+
+def check_number(
+    name: str,
+    value: Any,
+    *,
+    low: float = -math.inf,
+    high: float = math.inf,
+    low_open: bool = False,
+    unit: str = "",
+) -> float:
+    """The one validator of a user-set number outside the dataclasses (CLI values, limits,
+    env kwargs): ``value`` as a finite float in ``[low, high]`` (``(low, high]`` when
+    ``low_open``), else :class:`ParameterError` whose message starts with ``name`` (the
+    flag or keyword the user typed)."""
+    unit = f" {unit}" if unit else ""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ParameterError(f"{name} must be a number{unit}, got {value!r}")
+    v = float(value)
+    bad_low = v <= low if low_open else v < low
+    if not math.isfinite(v) or bad_low or v > high:
+        lo = f"> {low:g}" if low_open else f">= {low:g}"
+        span = lo if high == math.inf else f"{lo} and <= {high:g}"
+        raise ParameterError(f"{name} must be finite and {span}{unit}, got {value!r}")
+    return v
+
+
+def check_int(name: str, value: Any, *, low: int = 0) -> int:
+    """``value`` as an int >= ``low`` (bools refused), else ParameterError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ParameterError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
 
 
 def _set(obj: object, name: str, value: object) -> None:

@@ -242,8 +242,10 @@ class SweepPlan:
 
 
 def _check_int(flag: str, value: Any, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise InputError(f"{flag} must be >= {low}, got {value}")
+    try:
+        units.check_int(flag, value, low=low)
+    except units.ParameterError as exc:
+        raise InputError(str(exc)) from exc
 
 
 def resolve_sweep(opts: SweepOptions, warn: Any = None) -> SweepPlan:

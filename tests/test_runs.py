@@ -1,0 +1,122 @@
+"""``cnt_env.runs``: one run as a typed library (no argparse), its defaults from
+``cnt_env.presets`` only, its validation naming the flag, and its limits."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from cnt_env import presets, runs, units
+
+
+def test_resolve_run_takes_typed_keywords_and_uses_the_presets() -> None:
+    spec = runs.resolve_run("serpentine", groups={"vbar": 0.05}, seed=3, deposit=10.0)
+    assert spec.preset == "serpentine" and spec.substrate == "stepped" and spec.seed == 3
+    assert spec.params.vbar == 0.05 and spec.deposit_length == 10.0
+    mesh = presets.MESH["serpentine"]
+    assert spec.params.delta_bar == mesh["delta_bar"]
+    assert spec.sim_config.coarse_delta == mesh["coarse_delta"]
+    assert spec.sim_config.initial_radius == presets.INITIAL_RADIUS["stepped"]
+    assert spec.measure_options.transient_length == presets.RUN_TRANSIENT["serpentine"]
+    default = runs.resolve_run()
+    assert default.deposit_length == presets.RUN_DEPOSIT["coil"]
+    assert default.params.delta_bar == presets.MESH["coil"]["delta_bar"]
+    stepped = runs.resolve_run(substrate="stepped")
+    assert stepped.params.kappa_c_bar == presets.DEFAULT_KAPPA_C
+    with pytest.raises(runs.RunInputError):
+        runs.resolve_run(nonsense=1)
+
+
+def test_run_options_is_frozen_and_resolve_matches_resolve_run() -> None:
+    opts = runs.RunOptions(preset="coil", groups={"Hbar": 40.0}, deposit=5.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        opts.seed = 2  # type: ignore[misc]
+    assert runs.resolve(opts) == runs.resolve_run("coil", groups={"Hbar": 40.0}, deposit=5.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "flag"),
+    [
+        ({"groups": {"Hbar": float("nan")}}, "--Hbar"),
+        ({"groups": {"Hbar": 1e300}}, "--Hbar"),
+        ({"groups": {"Ibar": 1e300}}, "--Ibar"),
+        ({"groups": {"kappa_c_bar": 0.0}}, "--kappa-c"),
+        ({"groups": {"kappa_c_bar": 0.2}, "substrate": "flat"}, "--kappa-c"),
+        ({"groups": {"delta_bar": 1e-9}}, "--delta"),
+        ({"deposit": -1.0}, "--deposit"),
+        ({"deposit": 1e12}, "--max-nodes"),
+        ({"seed": -1}, "--seed"),
+        ({"seed": True}, "--seed"),
+        ({"drag_law": "x"}, "--drag-law"),
+        ({"preset": "x"}, "--preset"),
+        ({"transient": -5.0}, "--transient"),
+    ],
+)
+def test_invalid_input_names_the_flag(kwargs: dict, flag: str) -> None:
+    opts = runs.RunOptions(**kwargs)
+    with pytest.raises(runs.RunInputError) as info:
+        runs.resolve(opts, warn=None)
+    assert flag in str(info.value)
+
+
+def test_limits_are_validated_and_named() -> None:
+    for kwargs, flag in [
+        ({"max_nodes": 0}, "--max-nodes"),
+        ({"max_steps_per_length": 1.5}, "--max-steps"),
+        ({"max_wall_time": float("inf")}, "--max-wall-time"),
+        ({"max_wall_time": 0.0}, "--max-wall-time"),
+    ]:
+        with pytest.raises(runs.RunInputError, match=flag):
+            runs.Limits(**kwargs)
+
+
+def test_progress_guard_stops_a_run_without_progress() -> None:
+    guard = runs.guarded_progress(runs.Limits(max_steps_per_length=5))
+    for _ in range(5):
+        guard(0.5, 10.0)
+    with pytest.raises(runs.RunLimitError, match="--max-steps"):
+        guard(0.6, 10.0)
+    guard = runs.guarded_progress(runs.Limits(max_steps_per_length=5))
+    for i in range(50):  # 1 L_vb every 4 steps: progress, never stopped
+        guard(i / 4.0, 100.0)
+
+
+def test_simulate_runs_the_spec_under_its_limits_and_measures() -> None:
+    spec = runs.resolve_run("coil", groups={"Hbar": 40.0, "delta_bar": 1.0}, deposit=5.0,
+                            transient=0.0)  # fmt: skip
+    seen = {}
+
+    class Sim:
+        suspended_nodes = np.zeros((3, 3))
+
+        def trace(self) -> np.ndarray:
+            return np.column_stack([np.arange(6.0), np.zeros(6), np.zeros(6)])
+
+    def runner(config, length, seed, progress):
+        seen.update(config=config, length=length, seed=seed)
+        progress(length, length)
+        return Sim(), {"deposited_length": length, "steps": 1}
+
+    result = runs.simulate(spec, runner=runner)
+    assert seen == {"config": spec.sim_config, "length": 5.0, "seed": 0}
+    report = result.report()
+    assert report["deposited_length"] == 5.0 and report["config"]["preset"] == "coil"
+    assert report["params"] == spec.params.as_dict()
+    assert "error" in result.measurement or result.measurement.get("pattern")
+
+
+def test_estimated_nodes_counts_rod_and_trace() -> None:
+    spec = runs.resolve_run("serpentine", deposit=100.0)
+    n = runs.estimated_nodes(spec.sim_config, spec.deposit_length)
+    assert spec.params.Hbar + 100.0 < n < 2 * (spec.params.Hbar + 100.0) + 50
+
+
+def test_check_number_is_the_one_validator() -> None:
+    assert units.check_number("--x", 2, low=0.0, low_open=True) == 2.0
+    for bad in (0.0, float("nan"), "1", True):
+        with pytest.raises(units.ParameterError, match=r"^--x"):
+            units.check_number("--x", bad, low=0.0, low_open=True)
+    with pytest.raises(units.ParameterError, match=r"^--n"):
+        units.check_int("--n", -1)
