@@ -23,6 +23,7 @@ Lengths are in L_vb (units.py). JSON has no NaN: non-finite floats are stored as
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -72,7 +73,10 @@ class TraceFileError(ValueError):
 def to_jsonable(value: Any) -> Any:
     """``value`` with numpy scalars and arrays turned into Python ones, tuples into
     lists, and non-finite floats into ``None``, so that ``json.dumps(...,
-    allow_nan=False)`` always succeeds and the output is valid JSON."""
+    allow_nan=False)`` always succeeds and the output is valid JSON. A dataclass
+    instance becomes the dict of its fields. The one JSON converter of the package."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, Mapping):
         return {str(k): to_jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

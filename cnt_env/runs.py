@@ -183,7 +183,14 @@ def resolve_params(
     if "phi" in groups:
         changes["phi"] = groups["phi"]
     physical = dataclasses.replace(base, delta=None, **changes)
-    params = physical.to_dimensionless()
+    try:
+        params = physical.to_dimensionless()
+    except (ZeroDivisionError, OverflowError) as exc:
+        given = ", ".join(f"{FLAGS[k]} {v!r}" for k, v in si.items())
+        raise units.ParameterError(
+            f"the SI values ({given}) give dimensionless groups outside floating point "
+            f"({exc}); give values of the paper's orders of magnitude"
+        ) from exc
     late = {k: groups[k] for k in ("kappa_c_bar", "delta_bar") if k in groups}
     if late:
         params = dataclasses.replace(params, **late)

@@ -143,3 +143,13 @@ def test_output_set_writes_all_or_nothing(tmp_path: Path) -> None:
     outputs.check(a, "--out")
     with pytest.raises(OutputError, match="same file"):
         outputs.check(tmp_path / "." / "a.txt", "--png")
+
+
+def test_to_jsonable_takes_dataclasses_and_config_hash_matches_plain_json() -> None:
+    import hashlib
+
+    params = units.paper_groups("coil")
+    assert to_jsonable(params) == {k: to_jsonable(v) for k, v in params.as_dict().items()}
+    payload = {"config": params, "seed": 1}
+    plain = json.dumps(to_jsonable(payload), sort_keys=True)
+    assert config_hash(payload, length=64) == hashlib.sha256(plain.encode()).hexdigest()
