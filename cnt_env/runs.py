@@ -116,12 +116,12 @@ class Limits:
     ``max_nodes``: nodes in the simulation (the start-up rod plus the trace);
     ``max_steps_per_length``: physics steps allowed while less than 1 L_vb is deposited
     (a run that lays nothing stops with a clear error); ``max_wall_time``: seconds of
-    wall time (None: no limit).
+    wall time (default a day; None: no limit).
     """
 
     max_nodes: int = 2_000_000
     max_steps_per_length: int = 200_000
-    max_wall_time: float | None = None
+    max_wall_time: float | None = 86_400.0
 
     def __post_init__(self) -> None:
         try:
@@ -410,10 +410,11 @@ def guarded_progress(limits: Limits, progress: ProgressCallback | None = None) -
     """A ``progress(done, total)`` callback that enforces ``limits`` (called after every
     step) and then calls ``progress``; raises :class:`RunLimitError`."""
     start = time.monotonic()
-    state = {"mark": 0.0, "steps": 0}
+    state = {"mark": 0.0, "steps": 0, "calls": 0}
 
     def check(done: float, total: float) -> None:
         state["steps"] += 1
+        state["calls"] += 1
         if done >= state["mark"] + 1.0 or done >= total:
             state["mark"], state["steps"] = done, 0
         elif state["steps"] > limits.max_steps_per_length:
@@ -423,7 +424,7 @@ def guarded_progress(limits: Limits, progress: ProgressCallback | None = None) -
                 "progress with these parameters (e.g. a very large --Ibar); change them or "
                 "raise --max-steps"
             )
-        if limits.max_wall_time is not None and state["steps"] % 16 == 0:
+        if limits.max_wall_time is not None and state["calls"] % 16 == 0:
             if time.monotonic() - start > limits.max_wall_time:
                 raise RunLimitError(
                     f"--max-wall-time: the run took over {limits.max_wall_time:g} s "

@@ -120,3 +120,10 @@ def test_check_number_is_the_one_validator() -> None:
             units.check_number("--x", bad, low=0.0, low_open=True)
     with pytest.raises(units.ParameterError, match=r"^--n"):
         units.check_int("--n", -1)
+
+
+def test_wall_time_is_checked_while_the_run_progresses() -> None:
+    guard = runs.guarded_progress(runs.Limits(max_wall_time=1e-9))
+    with pytest.raises(runs.RunLimitError, match="--max-wall-time"):
+        for i in range(64):  # 1 L_vb per step: always progressing
+            guard(float(i + 1), 1000.0)

@@ -220,7 +220,7 @@ def add_limit_arguments(g: Any) -> None:
     g.add_argument(
         "--max-wall-time",
         type=float,
-        default=None,
+        default=d.max_wall_time,
         metavar="S",
-        help="wall time of one run in seconds (default: none)",
+        help=f"wall time of one run in seconds (default {d.max_wall_time:g}, a day)",
     )
