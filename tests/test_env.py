@@ -759,3 +759,19 @@ def test_route_families_draw_deterministically(rkw: dict) -> None:
         b = env.reset(seed=5)[1]
         assert a["target"] == b["target"] == fam
         assert a["target_length"] == b["target_length"]
+
+
+def test_route_task_is_deterministic_and_pickles(rkw: dict) -> None:
+    a, b = make(rkw), make(rkw)
+    acts = actions(4, 10)
+    for i, (sa, sb) in enumerate(zip(rollout(a, acts, seed=11), rollout(b, acts, seed=11),
+                                     strict=True)):  # fmt: skip
+        if len(sa) == 2:
+            assert_same(sa, sb, f"reset {i}")
+        else:
+            assert_same_step(sa, sb, f"step {i}")
+    copy = pickle.loads(pickle.dumps(a))
+    more = actions(5, 6)
+    for i, (sa, sb) in enumerate(zip(rollout(a, more), rollout(copy, more), strict=True)):
+        if len(sa) == 5:
+            assert_same_step(sa, sb, f"after pickling, step {i}")
