@@ -20,7 +20,6 @@ import numpy as np
 from gymnasium import spaces
 
 from cnt_env import MAX_EPISODE_STEPS
-from cnt_env.patterns import MeasureOptions, measure
 from cnt_env.sim.deposition import DepositionSim
 from cnt_env.sim.forces import DRAG_LAWS
 from cnt_env.sim.stepper import SimulationError
@@ -28,7 +27,13 @@ from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_sta
 from cnt_env.task import raster, routes, settings
 from cnt_env.task import targets as targets_mod
 from cnt_env.task.routes import DEFAULT_HALF_WIDTH, Route
-from cnt_env.task.scoring import COVERAGE_SPACING, ROUTE_TERMS, RouteScore, ThinScore
+from cnt_env.task.scoring import (
+    COVERAGE_SPACING,
+    ROUTE_TERMS,
+    RouteScore,
+    ThinScore,
+    pattern_measures,
+)
 from cnt_env.task.spaces import (
     LAID_RATIO_BOUND,
     LEAN_HEIGHT_FRACTIONS,
@@ -51,17 +56,6 @@ DEFAULT_VBAR_MAX = 0.13
 #: benchmarks/results/step_response.json), so the agent never acts faster than the rod
 #: can follow; the pattern's drift follows in a median 12 L_vb.
 CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 12.0}
-#: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.027 L_vb per 1.5 Hbar step in
-#: benchmarks/results/step_response.json).
-DEPOSITION_SPEED = 0.68
-#: Progress of the pattern along a route per L_vb of trace at the slowest useful flow
-#: (the serpentine across the steps at v̄ = 0.13 drifts 0.21; along the steps 0.34-0.58;
-#: benchmarks/results/step_response.json): it sets the per-route episode length.
-PROGRESS_RATE = 0.2
-#: Route episodes last ROUTE_STEPS_SLACK times the steps the measured rate needs, plus
-#: ROUTE_STEPS_MARGIN (the pattern's response to the first turn).
-ROUTE_STEPS_SLACK = 1.5
-ROUTE_STEPS_MARGIN = 10
 #: Trace window (L_vb) the K trace points of the observation span in the route task:
 #: about the 60 L_vb whose mean is the pattern's centre.
 ROUTE_TRACE_WINDOW = 64.0
@@ -74,14 +68,10 @@ DEFAULT_MAX_EPISODE_STEPS = MAX_EPISODE_STEPS
 #: Most physics steps one control step may take.
 MAX_SUBSTEPS = 100_000
 OBS_MODES = ("vector", "image")
-# Pattern measurements kept in info["pattern"] (patterns.measure keys).
-_PATTERN_KEYS = ("pattern", "measured_length", "amplitude", "peak_to_peak", "wavelength",
-                 "coil_radius", "n_uturns", "n_cycles", "n_loops", "n_self_crossings")  # fmt: skip
 _REWARD_KEYS = {
     "thin": ("reward_coverage", "reward_precision", "reward_progress", "reward_failure"),
     "corridor": (*(f"reward_{t}" for t in ROUTE_TERMS), "reward_failure"),
 }
-_MEASURE_OPTIONS = MeasureOptions(transient_length=0.0)
 # re-exported for callers of the v0 layout
 __all__ += ["COVERAGE_SPACING", "LAID_RATIO_BOUND", "POSITION_BOUND"]
 
@@ -447,11 +437,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         return obs, info
 
     def episode_steps_for(self, route: Route) -> int:
-        """Episode length (control steps) of ``route``: ``ROUTE_STEPS_SLACK`` times the
-        steps its length needs at the measured progress rate, plus a margin."""
-        laid_per_step = DEPOSITION_SPEED * self.control_interval / self.params.Hbar
-        need = route.length / (PROGRESS_RATE * laid_per_step)
-        return math.ceil(ROUTE_STEPS_SLACK * need) + ROUTE_STEPS_MARGIN
+        """Episode length (control steps) of ``route`` (:func:`routes.episode_steps`)."""
+        return routes.episode_steps(route.length, self.control_interval / self.params.Hbar)
 
     def _resolve_target(self, spec: Any) -> Route | targets_mod.Target:
         """The episode's target: drawn from ``families`` (spec None) or ``spec``
@@ -545,7 +532,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             or (limit is not None and self._steps == limit)
             or truncated
         ):
-            pattern = self._pattern(trace)
+            pattern = pattern_measures(trace[self._n0 - 1 :], self.substrate)
             if pattern is not None:
                 info["pattern"] = pattern
         if self.render_mode == "human":
@@ -594,15 +581,6 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             info["route_width"] = self.target.width
             info["max_episode_steps"] = self.max_episode_steps
         return info
-
-    def _pattern(self, trace: np.ndarray) -> dict[str, Any] | None:
-        """Pattern measures of the episode's trace (from the contact point at reset)."""
-        pts = trace[self._n0 - 1 :]
-        try:
-            m = measure(pts, _MEASURE_OPTIONS, substrate=self.substrate, flow_direction=None)
-        except ValueError:
-            return None  # too short or degenerate to measure
-        return {k: m[k] for k in _PATTERN_KEYS}
 
     # ---- observation (task/spaces.py, task/raster.py) -------------------------------------
     def _observation(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:

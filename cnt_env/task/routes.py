@@ -61,6 +61,7 @@ __all__ = [
     "HELD_OUT",
     "Route",
     "draw",
+    "episode_steps",
     "held_out",
     "rectangle",
     "resolve",
@@ -78,6 +79,29 @@ MIN_HALF_WIDTH = 1.0
 MIN_ROUTE_LENGTH = 1.0
 #: Default difficulty of :func:`sample` (0: short, straight, wide; 1: long, many turns).
 DEFAULT_DIFFICULTY = 0.5
+
+
+#: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.027 L_vb per 1.5 Hbar step in
+#: benchmarks/results/step_response.json).
+DEPOSITION_SPEED = 0.68
+#: Progress of the pattern along a route per L_vb of trace at the slowest useful flow
+#: (the serpentine across the steps at v̄ = 0.13 drifts 0.21; along the steps 0.34-0.58;
+#: benchmarks/results/step_response.json): it sets the per-route episode length.
+PROGRESS_RATE = 0.2
+#: Route episodes last ROUTE_STEPS_SLACK times the steps the measured rate needs, plus
+#: ROUTE_STEPS_MARGIN (the pattern's response to the first turn).
+ROUTE_STEPS_SLACK = 1.5
+ROUTE_STEPS_MARGIN = 10
+
+
+def episode_steps(length: float, control_hbar: float) -> int:
+    """Episode length (control steps) of a route ``length`` L_vb long with control steps
+    of ``control_hbar`` H̄: ``ROUTE_STEPS_SLACK`` times the steps its length needs at the
+    measured progress rate, plus ``ROUTE_STEPS_MARGIN``."""
+    laid_per_step = DEPOSITION_SPEED * control_hbar
+    return math.ceil(ROUTE_STEPS_SLACK * length / (PROGRESS_RATE * laid_per_step)) + (
+        ROUTE_STEPS_MARGIN
+    )
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from cnt_env.patterns import MeasureOptions, measure
 from cnt_env.task import targets as targets_mod
 
 __all__ = [
@@ -41,16 +42,31 @@ __all__ = [
     "ThinScore",
     "covered",
     "distances",
+    "pattern_measures",
     "score_route_trace",
     "score_trace",
 ]
 
+#: Pattern measurements of the episode's trace kept in info["pattern"] (patterns.measure).
+PATTERN_KEYS = ("pattern", "measured_length", "amplitude", "peak_to_peak", "wavelength",
+                "coil_radius", "n_uturns", "n_cycles", "n_loops", "n_self_crossings")  # fmt: skip
+_MEASURE_OPTIONS = MeasureOptions(transient_length=0.0)
 #: Largest spacing (L_vb) of the target samples used for coverage.
 COVERAGE_SPACING = 0.5
 #: Terms of the thin score, in the order of its weights.
 THIN_TERMS = ("coverage", "precision", "progress")
 #: Default weights (w_c, w_p, w_g) of the thin score.
 THIN_WEIGHTS = (0.5, 0.25, 0.25)
+
+
+def pattern_measures(trace: np.ndarray, substrate: str) -> dict[str, Any] | None:
+    """The :data:`PATTERN_KEYS` measures of ``trace`` (n, 3) (:func:`cnt_env.patterns.measure`,
+    NaN where one does not apply); None when it is too short or degenerate to measure."""
+    try:
+        m = measure(trace, _MEASURE_OPTIONS, substrate=substrate, flow_direction=None)
+    except ValueError:
+        return None
+    return {k: m[k] for k in PATTERN_KEYS}
 
 
 def distances(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
