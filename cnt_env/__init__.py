@@ -12,9 +12,9 @@ __version__ = "0.1.0"
 from gymnasium.envs.registration import register as _register
 from gymnasium.envs.registration import registry as _registry
 
-#: Episode length of ``CNTDeposit-v0`` (TimeLimit), in control steps of ~1 L_vb of trace:
-#: about 4 periods of the baseline serpentine, which lays ~95 L_vb of trace per period
-#: (benchmarks/env_throughput.py --baseline).
+#: Outer TimeLimit cap of ``CNTDeposit-v0``, in control steps. The thin task lays ~1 L_vb
+#: of trace per step (400 steps: about 4 periods of the baseline serpentine); route
+#: episodes end earlier, at the per-route ``env.max_episode_steps`` (docs/task.md).
 MAX_EPISODE_STEPS = 400
 
 if "CNTDeposit-v0" not in _registry:

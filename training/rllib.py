@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from training.callbacks import policy_kwargs
 from training.common import CONFIG_DIR, ENV_ID, env_settings, load_config
 
 __all__ = ["RLlibPolicy", "build_config", "main", "train_rllib"]
@@ -75,9 +76,7 @@ def build_config(
     env_kwargs, max_steps = env_settings(zoo)
     env_config = {**env_kwargs, "max_episode_steps": max_steps}
     n_steps = int(zoo.get("n_steps", 512))
-    net = list((zoo.get("policy_kwargs") or {}).get("net_arch", [64, 64]))
-    if isinstance(zoo.get("policy_kwargs"), str):  # rl-zoo string form
-        net = [64, 64]
+    net = list(policy_kwargs(zoo.get("policy_kwargs")).get("net_arch", [64, 64]))
     lr = zoo.get("learning_rate", 3e-4)
     if isinstance(lr, str):  # "lin_3e-4": RLlib takes a schedule of (timestep, value)
         lr0 = float(lr.split("_", 1)[1])
