@@ -29,6 +29,7 @@ import json
 import math
 import os
 import stat
+import struct
 import tempfile
 import zipfile
 import zlib
@@ -63,7 +64,12 @@ _WRITE_HINT = "write traces with `cnt-sim run --out FILE.npz`"
 # Errors a damaged archive can raise while it is opened or a member is read.
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip
 _NPY_MAGIC = b"\x93NUMPY"
-_READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError)
+_READ_ERRORS = (
+    OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zipfile.LargeZipFile,
+    zlib.error, struct.error, OverflowError,
+    RuntimeError,  # zipfile: an entry flagged as encrypted
+    NotImplementedError,  # zipfile: an unknown compression method
+)  # fmt: skip
 
 
 class TraceFileError(ValueError):
