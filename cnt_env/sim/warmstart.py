@@ -19,7 +19,6 @@ computed once and cached on disk (docs/architecture.md, "Start").
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import json
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from cnt_env import __version__
-from cnt_env.io import atomic_savez
+from cnt_env.io import atomic_savez, config_hash
 
 __all__ = [
     "CACHE_ENV_VAR",
@@ -248,31 +247,17 @@ def _source_fingerprint() -> str:
     return h.hexdigest()
 
 
-def _jsonable(value: Any) -> Any:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return repr(value)
-    return value
-
-
 def config_key(config: Any, warmup_length: float, seed: int) -> str:
     """SHA-256 naming the warm state of ``config`` (a :class:`DepositionConfig`)."""
     payload = {
         "format": FORMAT_VERSION,
         "version": __version__,
         "source": _source_fingerprint(),
-        "config": _jsonable(config),
+        "config": config,
         "warmup_length": float(warmup_length),
         "seed": int(seed),
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+    return config_hash(payload, length=64)
 
 
 def cache_path(key: str, cache_dir: str | os.PathLike[str] | None = None) -> Path:
