@@ -48,7 +48,19 @@ from cnt_env.rod.banded import (
     band_lu_solve,
     band_zero,
 )
-from cnt_env.sim.forces import DRAG_LAWS, DRAG_LINEAR, add_linear_drag, add_printed_drag, add_vdw
+from cnt_env.sim.forces import (
+    DRAG_LAWS,
+    DRAG_LINEAR,
+    VDW_BETA0,
+    VDW_CLAMP,
+    VDW_DELTA,
+    VDW_ENERGY,
+    VDW_NODE,
+    add_linear_drag,
+    add_printed_drag,
+    add_vdw,
+    vdw_pull,
+)
 
 _DIAG = KL + KU
 
@@ -57,6 +69,7 @@ CONVERGED = 0
 MAX_ITERATIONS = 1
 SINGULAR = 2
 NON_FINITE = 3
+PREDICTORS = ("velocity", "extrapolate")
 STATUS_TEXT = {
     CONVERGED: "converged",
     MAX_ITERATIONS: "Newton did not converge within max_iter",
@@ -134,6 +147,24 @@ class NewtonOptions:
     update_tol: float = 1e-12  # in units of the shortest rest length
     max_iter: int = 25
     max_halvings: int = 12
+    # Initial guess of the free DOFs: "velocity" q_n + dt u_n; "extrapolate" also adds
+    # the last step's change of velocity, q_n + dt (u_n + (dt/dt_prev)(u_n - u_{n-1})),
+    # when the previous step is known (else "velocity").
+    predictor: str = "velocity"
+    # Jacobian reuse (chord / Shamanskii Newton): 0 = full Newton (a new Jacobian and LU
+    # every iteration); 1 = reuse the LU within a step; 2 = also across steps while
+    # n_nodes, dt and the fixed DOFs are unchanged. A reused LU is refreshed whenever an
+    # iteration contracts the residual by less than ``chord_rate``.
+    jacobian_reuse: int = 0
+    chord_rate: float = 0.25
+
+    def __post_init__(self) -> None:
+        if self.predictor not in PREDICTORS:
+            raise ValueError(f"predictor must be one of {PREDICTORS}, got {self.predictor!r}")
+        if self.jacobian_reuse not in (0, 1, 2):
+            raise ValueError(f"jacobian_reuse must be 0, 1 or 2, got {self.jacobian_reuse!r}")
+        if not (0.0 < self.chord_rate < 1.0):
+            raise ValueError(f"chord_rate must be in (0, 1), got {self.chord_rate!r}")
 
 
 @njit(cache=True)
@@ -226,6 +257,68 @@ def assemble(
 
 
 @njit(cache=True)
+def residual(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    twist: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    drag_law: int,
+    vdw: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    rhs: np.ndarray,
+) -> float:
+    """The residual part of :func:`assemble` alone: rhs = -f (zero on fixed DOFs), the
+    same floating-point operations in the same order, so the same bits; ``ab`` is not
+    touched. Returns max |f| over free DOFs."""
+    n_dof = 4 * n_nodes - 1
+    for k in range(n_dof):
+        force[k] = ext_force[k]
+    elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, False)
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False)
+    if drag_law == DRAG_LINEAR:
+        add_linear_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+        )
+    else:
+        add_printed_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+        )
+    node = int(vdw[VDW_NODE])
+    if node >= 0:  # forces.add_vdw without its Jacobian entry
+        kc = 4 * node + 1
+        f, _ = vdw_pull(q[kc], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
+        force[kc] += f
+    res = 0.0
+    for k in range(n_dof):
+        if fixed[k]:
+            rhs[k] = 0.0
+            continue
+        r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # docs/model.md §3
+        rhs[k] = -r
+        if not abs(r) <= res:  # also catches NaN
+            res = abs(r)
+    return res
+
+
+@njit(cache=True)
 def newton_solve(
     q: np.ndarray,
     q_old: np.ndarray,
@@ -268,32 +361,76 @@ def newton_solve(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
+    reuse: int = 0,
+    chord_rate: float = 0.25,
+    lu_valid: bool = False,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
     (tangents, d1, d2, ref_twist, ...) belong to the returned q. out_stats = [iterations,
-    final free residual]. Returns a status code (CONVERGED, ...)."""
+    final free residual, LU factorisations, residual-only evaluations, LU valid on
+    return]. Returns a status code (CONVERGED, ...).
+
+    ``reuse = 0`` is Newton's method. A residual that the last two are expected to bring
+    below ``tol_abs`` (geometric extrapolation) is first evaluated alone
+    (:func:`residual`, no Jacobian): when it converges the Jacobian is not assembled, and
+    when it does not, the full assembly follows. Either way every iterate, residual and
+    Jacobian is the same, bit for bit, as with an assembly every iteration.
+
+    ``reuse >= 1`` (chord / Shamanskii Newton): the LU in ``ab``/``ipiv`` is kept while
+    each iteration contracts the residual by at least ``chord_rate``; otherwise J is
+    reassembled and refactored. ``lu_valid`` says ``ab``/``ipiv`` already hold the
+    factors of a Jacobian of this system (from the previous step, ``reuse = 2``).
+    """
     n_dof = 4 * n_nodes - 1
     status = MAX_ITERATIONS
     it = 0
     res = math.inf
+    res_prev = math.inf
+    res_prev2 = math.inf
+    n_factor = 0
+    n_resid = 0
+    have_lu = lu_valid and reuse > 0
     while True:
         update_frames(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
                       d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
         if status == CONVERGED or it >= max_iter:
             break
-        res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
-                       voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                       flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
-        if not math.isfinite(res):
-            status = NON_FINITE
-            break
-        if res <= tol_abs:
-            status = CONVERGED
-            break
-        if band_lu_factor(ab, n_dof, ipiv) != 0:
-            status = SINGULAR
-            break
+        if reuse > 0 and have_lu:
+            cheap = True
+        else:
+            # expected next residual by geometric extrapolation of the last two
+            cheap = it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs
+        full = True
+        if cheap:
+            res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
+                           voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
+                           flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+            n_resid += 1
+            if not math.isfinite(res):
+                status = NON_FINITE
+                break
+            if res <= tol_abs:
+                status = CONVERGED
+                break
+            # chord: keep the factors while the residual contracts fast enough
+            full = not (reuse > 0 and have_lu and not res > chord_rate * res_prev)
+        if full:
+            res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
+                           voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
+                           flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+            have_lu = False
+            if not math.isfinite(res):
+                status = NON_FINITE
+                break
+            if res <= tol_abs:
+                status = CONVERGED
+                break
+            if band_lu_factor(ab, n_dof, ipiv) != 0:
+                status = SINGULAR
+                break
+            have_lu = True
+            n_factor += 1
         band_lu_solve(ab, n_dof, ipiv, rhs)
         du = 0.0
         for k in range(n_dof):
@@ -301,6 +438,8 @@ def newton_solve(
             if not abs(rhs[k]) <= du:
                 du = abs(rhs[k])
         it += 1
+        res_prev2 = res_prev
+        res_prev = res
         if not math.isfinite(du):
             status = NON_FINITE
             break
@@ -308,7 +447,104 @@ def newton_solve(
             status = CONVERGED  # frames are refreshed for this q at the loop top
     out_stats[0] = it
     out_stats[1] = res
+    out_stats[2] = n_factor
+    out_stats[3] = n_resid
+    out_stats[4] = 1.0 if have_lu else 0.0
     return status
+
+
+@njit(cache=True)
+def implicit_step(
+    q: np.ndarray,
+    u: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    u_prev: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    accel_ratio: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    tangents_old: np.ndarray,
+    d1_old: np.ndarray,
+    ref_twist_old: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    drag_law: int,
+    vdw: np.ndarray,
+    tol_abs: float,
+    update_tol: float,
+    max_iter: int,
+    tangents: np.ndarray,
+    lengths: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    kb: np.ndarray,
+    kappa: np.ndarray,
+    twist: np.ndarray,
+    ref_twist: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    ipiv: np.ndarray,
+    rhs: np.ndarray,
+    out_stats: np.ndarray,
+    reuse: int,
+    chord_rate: float,
+    lu_valid: bool,
+) -> int:
+    """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
+    step start, predict, solve; commit (u, u_prev, start-of-step frames) on success or
+    restore q and u on failure. ``accel_ratio`` < 0 selects the velocity predictor
+    q_n + dt u_n; otherwise q_n + dt (u_n + accel_ratio (u_n - u_prev)) on free DOFs."""
+    n_dof = 4 * n_nodes - 1
+    for k in range(n_dof):
+        q_old[k] = q[k]
+        u_old[k] = u[k]
+    if accel_ratio < 0.0:
+        for k in range(n_dof):
+            if fixed[k] == 0:
+                q[k] += dt * u[k]
+    else:
+        for k in range(n_dof):
+            if fixed[k] == 0:
+                q[k] += dt * (u[k] + accel_ratio * (u[k] - u_prev[k]))
+    min_rest = rest_lengths[0]
+    for j in range(1, n_nodes - 1):
+        if rest_lengths[j] < min_rest:
+            min_rest = rest_lengths[j]
+    status = newton_solve(
+        q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s, k_b,
+        k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
+        c_sigma, drag_law, vdw, tol_abs, update_tol * min_rest, max_iter, tangents, lengths,
+        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, reuse,
+        chord_rate, lu_valid,
+    )  # fmt: skip
+    if status != CONVERGED:
+        for k in range(n_dof):
+            q[k] = q_old[k]
+            u[k] = u_old[k]
+        return status
+    for k in range(n_dof):
+        u_prev[k] = u_old[k]
+        u[k] = (q[k] - q_old[k]) / dt
+    for j in range(n_nodes - 1):
+        for c in range(3):
+            tangents_old[j, c] = tangents[j, c]
+            d1_old[j, c] = d1[j, c]
+    for i in range(n_nodes):
+        ref_twist_old[i] = ref_twist[i]
+    return CONVERGED
 
 
 class Rod:
@@ -362,6 +598,13 @@ class Rod:
         self.steps = 0
         self.newton_iterations = 0
         self.halvings = 0
+        self.lu_factorisations = 0
+        # predictor history: _u_prev holds u_{n-1} when self.steps == _hist_step
+        self._dt_prev = 0.0
+        self._hist_step = -1
+        # Jacobian reuse across steps: the LU in _ab/_ipiv is that of (n, dt, fixed) below
+        self._lu_valid = False
+        self._lu_key = (0, 0.0)
 
         for i in range(n):
             self.q[4 * i : 4 * i + 3] = nodes[i]
@@ -379,7 +622,7 @@ class Rod:
 
     # per-DOF, per-edge and per-node buffers, and the Newton workspace (name: (shape, dtype))
     _DOF_BUFFERS = ("q", "u", "mass", "fixed", "ext_force", "_q_old", "_u_old", "_force",
-                    "_rhs", "_ipiv")  # fmt: skip
+                    "_rhs", "_ipiv", "_u_prev")  # fmt: skip
     _EDGE_BUFFERS = ("rest_lengths", "drag_on", "tangents_old", "d1_old", "_tangents",
                      "_lengths", "_d1", "_d2", "_m1", "_m2")  # fmt: skip
     _NODE_BUFFERS = ("voronoi_lengths", "ref_twist_old", "_kb", "_kappa", "_twist",
@@ -395,7 +638,7 @@ class Rod:
             "fixed": np.zeros(n_dof_cap, dtype=np.uint8), "ext_force": np.zeros(n_dof_cap),
             "_q_old": np.zeros(n_dof_cap), "_u_old": np.zeros(n_dof_cap),
             "_force": np.zeros(n_dof_cap), "_rhs": np.zeros(n_dof_cap),
-            "_ipiv": np.zeros(n_dof_cap, dtype=np.int64),
+            "_ipiv": np.zeros(n_dof_cap, dtype=np.int64), "_u_prev": np.zeros(n_dof_cap),
             "rest_lengths": np.zeros(cap - 1), "drag_on": np.ones(cap - 1, dtype=np.uint8),
             "tangents_old": np.zeros((cap - 1, 3)), "d1_old": np.zeros((cap - 1, 3)),
             "_tangents": np.zeros((cap - 1, 3)), "_lengths": np.zeros(cap - 1),
@@ -412,7 +655,9 @@ class Rod:
                 arr[:m] = prev[:m]
             setattr(self, name, arr)
         self._ab = band_alloc(n_dof_cap)
-        self._stats = np.zeros(2)
+        self._lu_fixed = np.zeros(n_dof_cap, dtype=np.uint8)
+        self._stats = np.zeros(5)
+        self._lu_valid = False
         self.max_nodes = cap
 
     def append_node(self, position: np.ndarray, velocity: np.ndarray, rest_length: float) -> None:
@@ -431,6 +676,7 @@ class Rod:
         self.u[i : i + 3] = velocity
         self.q[i - 1] = self.q[i - 5]  # theta of the new edge = theta of the last edge
         self.u[i - 1] = self.u[i - 5]
+        self._u_prev[i - 1 : i + 3] = self.u[i - 1 : i + 3]  # no acceleration known
         self.fixed[i - 1 : i + 3] = 0
         self.ext_force[i - 1 : i + 3] = 0.0
         e = np.asarray(position, dtype=np.float64) - self.q[i - 4 : i - 1]
@@ -486,6 +732,7 @@ class Rod:
             self.u[b : b + 3] = (1 - w) * u0 + w * u1
             self.q[b + 3] = theta
             self.u[b + 3] = omega
+            self._u_prev[b : b + 4] = self.u[b : b + 4]  # no acceleration known
             self.fixed[b : b + 4] = 0
             self.ext_force[b : b + 4] = 0.0
             self.ref_twist_old[j + 1 + m] = 0.0
@@ -587,46 +834,56 @@ class Rod:
 
     # ---- stepping -------------------------------------------------------------
     def _try_step(self, dt: float) -> int:
-        """Attempt one step of size dt. On success commit it; on failure restore."""
-        nd = self.n_dof
+        """Attempt one step of size dt. On success commit it; on failure restore.
+
+        The whole attempt (save, predict, Newton, commit or restore) is one compiled
+        call, :func:`implicit_step`."""
         n = self.n_nodes
-        self._q_old[:nd] = self.q[:nd]
-        self._u_old[:nd] = self.u[:nd]
-        # explicit predictor for free DOFs (fixed DOFs keep their prescribed values)
-        free = self.fixed[:nd] == 0
-        self.q[:nd][free] += dt * self.u[:nd][free]
+        o = self.options
+        accel = -1.0  # the velocity predictor
+        if o.predictor == "extrapolate" and self._hist_step == self.steps and self._dt_prev > 0:
+            accel = dt / self._dt_prev
+        lu_valid = False
+        if o.jacobian_reuse == 2 and self._lu_valid and self._lu_key == (n, dt):
+            nd = self.n_dof
+            lu_valid = bool(np.array_equal(self._lu_fixed[:nd], self.fixed[:nd]))
         try:
-            status = self._newton(n, dt)
+            status = self._newton(n, dt, accel, lu_valid)
         except ZeroDivisionError:  # numba's error model: a degenerate edge (zero length)
-            status = NON_FINITE
-        self.newton_iterations += int(self._stats[0])
-        if status != CONVERGED:
+            nd = self.n_dof
             self.q[:nd] = self._q_old[:nd]
             self.u[:nd] = self._u_old[:nd]
+            self._lu_valid = False
+            return NON_FINITE
+        self.newton_iterations += int(self._stats[0])
+        self.lu_factorisations += int(self._stats[2])
+        self._lu_valid = o.jacobian_reuse == 2 and self._stats[4] > 0.0
+        if self._lu_valid and self._stats[2] > 0:
+            nd = self.n_dof
+            self._lu_key = (n, dt)
+            self._lu_fixed[:nd] = self.fixed[:nd]
+        if status != CONVERGED:
+            self._lu_valid = False
             return status
-        self.u[:nd] = (self.q[:nd] - self._q_old[:nd]) / dt
-        ne = n - 1
-        self.tangents_old[:ne] = self._tangents[:ne]
-        self.d1_old[:ne] = self._d1[:ne]
-        self.ref_twist_old[:n] = self._ref_twist[:n]
         self.time += dt
         self.steps += 1
+        self._dt_prev = dt
+        self._hist_step = self.steps
         return CONVERGED
 
-    def _newton(self, n: int, dt: float) -> int:
+    def _newton(self, n: int, dt: float, accel: float = -1.0, lu_valid: bool = False) -> int:
         m, d, o = self.material, self.drag, self.options
         self._stats[:] = 0.0
-        return newton_solve(
-            self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
-            self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
-            self.tangents_old, self.d1_old, self.ref_twist_old,
-            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
-            o.residual_tol * o.force_scale,
-            o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
-            o.max_iter,
+        return implicit_step(
+            self.q, self.u, self._q_old, self._u_old, self._u_prev, n, dt, accel,
+            self.mass, self.fixed, self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b,
+            m.k_t, self.tangents_old, self.d1_old, self.ref_twist_old, self.ext_force,
+            self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
+            o.residual_tol * o.force_scale, o.update_tol, o.max_iter,
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
+            o.jacobian_reuse, o.chord_rate, lu_valid,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
@@ -653,8 +910,15 @@ class Rod:
         self._advance(0.5 * dt, depth + 1)
 
     def snapshot(self) -> dict:
-        """Exact copy of the dynamic state (restore with :meth:`restore`)."""
+        """Exact copy of the dynamic state (restore with :meth:`restore`).
+
+        A Jacobian kept across steps (``jacobian_reuse = 2``) is not part of the state:
+        taking a snapshot drops it, so the run that continues and a run restored from the
+        snapshot take the same steps, bit for bit."""
+        self._lu_valid = False
         return {
+            "u_prev": self._u_prev.copy(), "dt_prev": self._dt_prev,
+            "hist_step": self._hist_step,
             "n_nodes": self.n_nodes, "q": self.q.copy(), "u": self.u.copy(),
             "fixed": self.fixed.copy(), "ext_force": self.ext_force.copy(),
             "rest_lengths": self.rest_lengths.copy(), "drag_on": self.drag_on.copy(),
@@ -663,6 +927,7 @@ class Rod:
             "vdw": self.vdw.copy(), "voronoi_lengths": self.voronoi_lengths.copy(),
             "mass": self.mass.copy(), "time": self.time, "steps": self.steps,
             "newton_iterations": self.newton_iterations, "halvings": self.halvings,
+            "lu_factorisations": self.lu_factorisations,
         }  # fmt: skip
 
     def restore(self, snap: dict) -> None:
@@ -670,7 +935,11 @@ class Rod:
         cap = (len(snap["q"])) // 4
         if cap != self.max_nodes:
             self._allocate(cap)
+        self._lu_valid = False
+        self._hist_step = -1  # no predictor history unless the snapshot holds it
+        names = {"u_prev": "_u_prev", "dt_prev": "_dt_prev", "hist_step": "_hist_step"}
         for key, value in snap.items():
+            key = names.get(key, key)
             if isinstance(value, np.ndarray):
                 getattr(self, key)[...] = value
             else:
@@ -684,5 +953,7 @@ __all__ = [
     "Rod",
     "RodMaterial",
     "SimulationError",
+    "implicit_step",
     "newton_solve",
+    "residual",
 ]
