@@ -157,6 +157,9 @@ class NewtonOptions:
     # iteration contracts the residual by less than ``chord_rate``.
     jacobian_reuse: int = 0
     chord_rate: float = 0.25
+    # Evaluate a residual that is expected to converge alone, before assembling J (the
+    # results are bit-identical either way; False is the pre-issue-11 cost, for A/B).
+    residual_check: bool = True
 
     def __post_init__(self) -> None:
         if self.predictor not in PREDICTORS:
@@ -364,6 +367,7 @@ def newton_solve(
     reuse: int = 0,
     chord_rate: float = 0.25,
     lu_valid: bool = False,
+    check: bool = True,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
@@ -400,7 +404,7 @@ def newton_solve(
             cheap = True
         else:
             # expected next residual by geometric extrapolation of the last two
-            cheap = it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs
+            cheap = check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs
         full = True
         if cheap:
             res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
@@ -502,6 +506,7 @@ def implicit_step(
     reuse: int,
     chord_rate: float,
     lu_valid: bool,
+    check: bool,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
     step start, predict, solve; commit (u, u_prev, start-of-step frames) on success or
@@ -528,7 +533,7 @@ def implicit_step(
         k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
         c_sigma, drag_law, vdw, tol_abs, update_tol * min_rest, max_iter, tangents, lengths,
         d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, reuse,
-        chord_rate, lu_valid,
+        chord_rate, lu_valid, check,
     )  # fmt: skip
     if status != CONVERGED:
         for k in range(n_dof):
@@ -883,7 +888,7 @@ class Rod:
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
-            o.jacobian_reuse, o.chord_rate, lu_valid,
+            o.jacobian_reuse, o.chord_rate, lu_valid, o.residual_check,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
