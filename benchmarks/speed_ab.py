@@ -70,8 +70,8 @@ def main(argv: list[str] | None = None) -> None:
                     prev = 0.0
             cpu = time.process_time() - t0
         out.update(mode="env", steps=args.steps, cpu_s=round(cpu, 3), laid=round(laid, 2),
-                   laid_per_cpu_s=round(laid / cpu, 2),
-                   control_steps_per_cpu_s=round(args.steps / cpu, 2), physics_steps=phys)  # fmt: skip
+                   laid_per_cpu_s=round(laid / cpu, 2), physics_steps=phys,
+                   control_steps_per_cpu_s=round(args.steps / cpu, 2))  # fmt: skip
     else:
         cfg = default_config(args.preset, **extra)
         DepositionSim(cfg, seed=0).step()  # compile / load the numba cache outside the timing

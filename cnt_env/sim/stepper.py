@@ -69,7 +69,6 @@ CONVERGED = 0
 MAX_ITERATIONS = 1
 SINGULAR = 2
 NON_FINITE = 3
-PREDICTORS = ("velocity", "extrapolate")
 STATUS_TEXT = {
     CONVERGED: "converged",
     MAX_ITERATIONS: "Newton did not converge within max_iter",
@@ -147,27 +146,9 @@ class NewtonOptions:
     update_tol: float = 1e-12  # in units of the shortest rest length
     max_iter: int = 25
     max_halvings: int = 12
-    # Initial guess of the free DOFs: "velocity" q_n + dt u_n; "extrapolate" also adds
-    # the last step's change of velocity, q_n + dt (u_n + (dt/dt_prev)(u_n - u_{n-1})),
-    # when the previous step is known (else "velocity").
-    predictor: str = "velocity"
-    # Jacobian reuse (chord / Shamanskii Newton): 0 = full Newton (a new Jacobian and LU
-    # every iteration); 1 = reuse the LU within a step; 2 = also across steps while
-    # n_nodes, dt and the fixed DOFs are unchanged. A reused LU is refreshed whenever an
-    # iteration contracts the residual by less than ``chord_rate``.
-    jacobian_reuse: int = 0
-    chord_rate: float = 0.25
     # Evaluate a residual that is expected to converge alone, before assembling J (the
     # results are bit-identical either way; False is the pre-issue-11 cost, for A/B).
     residual_check: bool = True
-
-    def __post_init__(self) -> None:
-        if self.predictor not in PREDICTORS:
-            raise ValueError(f"predictor must be one of {PREDICTORS}, got {self.predictor!r}")
-        if self.jacobian_reuse not in (0, 1, 2):
-            raise ValueError(f"jacobian_reuse must be 0, 1 or 2, got {self.jacobian_reuse!r}")
-        if not (0.0 < self.chord_rate < 1.0):
-            raise ValueError(f"chord_rate must be in (0, 1), got {self.chord_rate!r}")
 
 
 @njit(cache=True)
@@ -364,27 +345,19 @@ def newton_solve(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
-    reuse: int = 0,
-    chord_rate: float = 0.25,
-    lu_valid: bool = False,
     check: bool = True,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
     (tangents, d1, d2, ref_twist, ...) belong to the returned q. out_stats = [iterations,
-    final free residual, LU factorisations, residual-only evaluations, LU valid on
-    return]. Returns a status code (CONVERGED, ...).
+    final free residual, LU factorisations, residual-only evaluations]. Returns a status
+    code (CONVERGED, ...).
 
-    ``reuse = 0`` is Newton's method. A residual that the last two are expected to bring
-    below ``tol_abs`` (geometric extrapolation) is first evaluated alone
-    (:func:`residual`, no Jacobian): when it converges the Jacobian is not assembled, and
-    when it does not, the full assembly follows. Either way every iterate, residual and
-    Jacobian is the same, bit for bit, as with an assembly every iteration.
-
-    ``reuse >= 1`` (chord / Shamanskii Newton): the LU in ``ab``/``ipiv`` is kept while
-    each iteration contracts the residual by at least ``chord_rate``; otherwise J is
-    reassembled and refactored. ``lu_valid`` says ``ab``/``ipiv`` already hold the
-    factors of a Jacobian of this system (from the previous step, ``reuse = 2``).
+    A residual that the last two are expected to bring below ``tol_abs`` (geometric
+    extrapolation; ``check``) is first evaluated alone (:func:`residual`, no Jacobian):
+    when it converges the Jacobian is not assembled, and when it does not, the full
+    assembly follows. Either way every iterate, residual and Jacobian is the same, bit
+    for bit, as with an assembly every iteration.
     """
     n_dof = 4 * n_nodes - 1
     status = MAX_ITERATIONS
@@ -394,19 +367,14 @@ def newton_solve(
     res_prev2 = math.inf
     n_factor = 0
     n_resid = 0
-    have_lu = lu_valid and reuse > 0
     while True:
         update_frames(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
                       d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
         if status == CONVERGED or it >= max_iter:
             break
-        if reuse > 0 and have_lu:
-            cheap = True
-        else:
-            # expected next residual by geometric extrapolation of the last two
-            cheap = check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs
-        full = True
-        if cheap:
+        # expected residual by geometric extrapolation of the last two: if it converges,
+        # evaluate it without the Jacobian first
+        if check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs:
             res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                            voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
                            flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
@@ -417,24 +385,19 @@ def newton_solve(
             if res <= tol_abs:
                 status = CONVERGED
                 break
-            # chord: keep the factors while the residual contracts fast enough
-            full = not (reuse > 0 and have_lu and not res > chord_rate * res_prev)
-        if full:
-            res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
-                           voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                           flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
-            have_lu = False
-            if not math.isfinite(res):
-                status = NON_FINITE
-                break
-            if res <= tol_abs:
-                status = CONVERGED
-                break
-            if band_lu_factor(ab, n_dof, ipiv) != 0:
-                status = SINGULAR
-                break
-            have_lu = True
-            n_factor += 1
+        res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
+                       voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
+                       flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+        if not math.isfinite(res):
+            status = NON_FINITE
+            break
+        if res <= tol_abs:
+            status = CONVERGED
+            break
+        if band_lu_factor(ab, n_dof, ipiv) != 0:
+            status = SINGULAR
+            break
+        n_factor += 1
         band_lu_solve(ab, n_dof, ipiv, rhs)
         du = 0.0
         for k in range(n_dof):
@@ -453,7 +416,6 @@ def newton_solve(
     out_stats[1] = res
     out_stats[2] = n_factor
     out_stats[3] = n_resid
-    out_stats[4] = 1.0 if have_lu else 0.0
     return status
 
 
@@ -463,10 +425,8 @@ def implicit_step(
     u: np.ndarray,
     q_old: np.ndarray,
     u_old: np.ndarray,
-    u_prev: np.ndarray,
     n_nodes: int,
     dt: float,
-    accel_ratio: float,
     mass: np.ndarray,
     fixed: np.ndarray,
     rest_lengths: np.ndarray,
@@ -503,27 +463,18 @@ def implicit_step(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
-    reuse: int,
-    chord_rate: float,
-    lu_valid: bool,
     check: bool,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
-    step start, predict, solve; commit (u, u_prev, start-of-step frames) on success or
-    restore q and u on failure. ``accel_ratio`` < 0 selects the velocity predictor
-    q_n + dt u_n; otherwise q_n + dt (u_n + accel_ratio (u_n - u_prev)) on free DOFs."""
+    step start, predict q_n + dt u_n on free DOFs, solve; commit (u, start-of-step
+    frames) on success or restore q and u on failure."""
     n_dof = 4 * n_nodes - 1
     for k in range(n_dof):
         q_old[k] = q[k]
         u_old[k] = u[k]
-    if accel_ratio < 0.0:
-        for k in range(n_dof):
-            if fixed[k] == 0:
-                q[k] += dt * u[k]
-    else:
-        for k in range(n_dof):
-            if fixed[k] == 0:
-                q[k] += dt * (u[k] + accel_ratio * (u[k] - u_prev[k]))
+    for k in range(n_dof):
+        if fixed[k] == 0:
+            q[k] += dt * u[k]
     min_rest = rest_lengths[0]
     for j in range(1, n_nodes - 1):
         if rest_lengths[j] < min_rest:
@@ -532,8 +483,7 @@ def implicit_step(
         q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s, k_b,
         k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
         c_sigma, drag_law, vdw, tol_abs, update_tol * min_rest, max_iter, tangents, lengths,
-        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, reuse,
-        chord_rate, lu_valid, check,
+        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, check,
     )  # fmt: skip
     if status != CONVERGED:
         for k in range(n_dof):
@@ -541,7 +491,6 @@ def implicit_step(
             u[k] = u_old[k]
         return status
     for k in range(n_dof):
-        u_prev[k] = u_old[k]
         u[k] = (q[k] - q_old[k]) / dt
     for j in range(n_nodes - 1):
         for c in range(3):
@@ -604,12 +553,6 @@ class Rod:
         self.newton_iterations = 0
         self.halvings = 0
         self.lu_factorisations = 0
-        # predictor history: _u_prev holds u_{n-1} when self.steps == _hist_step
-        self._dt_prev = 0.0
-        self._hist_step = -1
-        # Jacobian reuse across steps: the LU in _ab/_ipiv is that of (n, dt, fixed) below
-        self._lu_valid = False
-        self._lu_key = (0, 0.0)
 
         for i in range(n):
             self.q[4 * i : 4 * i + 3] = nodes[i]
@@ -627,7 +570,7 @@ class Rod:
 
     # per-DOF, per-edge and per-node buffers, and the Newton workspace (name: (shape, dtype))
     _DOF_BUFFERS = ("q", "u", "mass", "fixed", "ext_force", "_q_old", "_u_old", "_force",
-                    "_rhs", "_ipiv", "_u_prev")  # fmt: skip
+                    "_rhs", "_ipiv")  # fmt: skip
     _EDGE_BUFFERS = ("rest_lengths", "drag_on", "tangents_old", "d1_old", "_tangents",
                      "_lengths", "_d1", "_d2", "_m1", "_m2")  # fmt: skip
     _NODE_BUFFERS = ("voronoi_lengths", "ref_twist_old", "_kb", "_kappa", "_twist",
@@ -643,7 +586,7 @@ class Rod:
             "fixed": np.zeros(n_dof_cap, dtype=np.uint8), "ext_force": np.zeros(n_dof_cap),
             "_q_old": np.zeros(n_dof_cap), "_u_old": np.zeros(n_dof_cap),
             "_force": np.zeros(n_dof_cap), "_rhs": np.zeros(n_dof_cap),
-            "_ipiv": np.zeros(n_dof_cap, dtype=np.int64), "_u_prev": np.zeros(n_dof_cap),
+            "_ipiv": np.zeros(n_dof_cap, dtype=np.int64),
             "rest_lengths": np.zeros(cap - 1), "drag_on": np.ones(cap - 1, dtype=np.uint8),
             "tangents_old": np.zeros((cap - 1, 3)), "d1_old": np.zeros((cap - 1, 3)),
             "_tangents": np.zeros((cap - 1, 3)), "_lengths": np.zeros(cap - 1),
@@ -660,9 +603,7 @@ class Rod:
                 arr[:m] = prev[:m]
             setattr(self, name, arr)
         self._ab = band_alloc(n_dof_cap)
-        self._lu_fixed = np.zeros(n_dof_cap, dtype=np.uint8)
-        self._stats = np.zeros(5)
-        self._lu_valid = False
+        self._stats = np.zeros(4)
         self.max_nodes = cap
 
     def append_node(self, position: np.ndarray, velocity: np.ndarray, rest_length: float) -> None:
@@ -681,7 +622,6 @@ class Rod:
         self.u[i : i + 3] = velocity
         self.q[i - 1] = self.q[i - 5]  # theta of the new edge = theta of the last edge
         self.u[i - 1] = self.u[i - 5]
-        self._u_prev[i - 1 : i + 3] = self.u[i - 1 : i + 3]  # no acceleration known
         self.fixed[i - 1 : i + 3] = 0
         self.ext_force[i - 1 : i + 3] = 0.0
         e = np.asarray(position, dtype=np.float64) - self.q[i - 4 : i - 1]
@@ -737,7 +677,6 @@ class Rod:
             self.u[b : b + 3] = (1 - w) * u0 + w * u1
             self.q[b + 3] = theta
             self.u[b + 3] = omega
-            self._u_prev[b : b + 4] = self.u[b : b + 4]  # no acceleration known
             self.fixed[b : b + 4] = 0
             self.ext_force[b : b + 4] = 0.0
             self.ref_twist_old[j + 1 + m] = 0.0
@@ -844,43 +783,26 @@ class Rod:
         The whole attempt (save, predict, Newton, commit or restore) is one compiled
         call, :func:`implicit_step`."""
         n = self.n_nodes
-        o = self.options
-        accel = -1.0  # the velocity predictor
-        if o.predictor == "extrapolate" and self._hist_step == self.steps and self._dt_prev > 0:
-            accel = dt / self._dt_prev
-        lu_valid = False
-        if o.jacobian_reuse == 2 and self._lu_valid and self._lu_key == (n, dt):
-            nd = self.n_dof
-            lu_valid = bool(np.array_equal(self._lu_fixed[:nd], self.fixed[:nd]))
         try:
-            status = self._newton(n, dt, accel, lu_valid)
+            status = self._newton(n, dt)
         except ZeroDivisionError:  # numba's error model: a degenerate edge (zero length)
             nd = self.n_dof
             self.q[:nd] = self._q_old[:nd]
             self.u[:nd] = self._u_old[:nd]
-            self._lu_valid = False
             return NON_FINITE
         self.newton_iterations += int(self._stats[0])
         self.lu_factorisations += int(self._stats[2])
-        self._lu_valid = o.jacobian_reuse == 2 and self._stats[4] > 0.0
-        if self._lu_valid and self._stats[2] > 0:
-            nd = self.n_dof
-            self._lu_key = (n, dt)
-            self._lu_fixed[:nd] = self.fixed[:nd]
         if status != CONVERGED:
-            self._lu_valid = False
             return status
         self.time += dt
         self.steps += 1
-        self._dt_prev = dt
-        self._hist_step = self.steps
         return CONVERGED
 
-    def _newton(self, n: int, dt: float, accel: float = -1.0, lu_valid: bool = False) -> int:
+    def _newton(self, n: int, dt: float) -> int:
         m, d, o = self.material, self.drag, self.options
         self._stats[:] = 0.0
         return implicit_step(
-            self.q, self.u, self._q_old, self._u_old, self._u_prev, n, dt, accel,
+            self.q, self.u, self._q_old, self._u_old, n, dt,
             self.mass, self.fixed, self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b,
             m.k_t, self.tangents_old, self.d1_old, self.ref_twist_old, self.ext_force,
             self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
@@ -888,7 +810,7 @@ class Rod:
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
-            o.jacobian_reuse, o.chord_rate, lu_valid, o.residual_check,
+            o.residual_check,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
@@ -915,15 +837,8 @@ class Rod:
         self._advance(0.5 * dt, depth + 1)
 
     def snapshot(self) -> dict:
-        """Exact copy of the dynamic state (restore with :meth:`restore`).
-
-        A Jacobian kept across steps (``jacobian_reuse = 2``) is not part of the state:
-        taking a snapshot drops it, so the run that continues and a run restored from the
-        snapshot take the same steps, bit for bit."""
-        self._lu_valid = False
+        """Exact copy of the dynamic state (restore with :meth:`restore`)."""
         return {
-            "u_prev": self._u_prev.copy(), "dt_prev": self._dt_prev,
-            "hist_step": self._hist_step,
             "n_nodes": self.n_nodes, "q": self.q.copy(), "u": self.u.copy(),
             "fixed": self.fixed.copy(), "ext_force": self.ext_force.copy(),
             "rest_lengths": self.rest_lengths.copy(), "drag_on": self.drag_on.copy(),
@@ -940,11 +855,7 @@ class Rod:
         cap = (len(snap["q"])) // 4
         if cap != self.max_nodes:
             self._allocate(cap)
-        self._lu_valid = False
-        self._hist_step = -1  # no predictor history unless the snapshot holds it
-        names = {"u_prev": "_u_prev", "dt_prev": "_dt_prev", "hist_step": "_hist_step"}
         for key, value in snap.items():
-            key = names.get(key, key)
             if isinstance(value, np.ndarray):
                 getattr(self, key)[...] = value
             else:
