@@ -1,7 +1,8 @@
 """Writes tests/data/stepper_regression.npz: reference results of the implicit stepper
 (issue 11), so that speed work on the stepper is checked bit for bit against them.
 
-Run with the code whose results are the reference (it was generated at commit 9eb2b55):
+Run with the code whose results are the reference (it was generated at commit 9eb2b55,
+whose Newton tolerance was residual_tol = 1e-8; the test passes that tolerance):
 
     PYTHONPATH=<checkout> python tests/data/make_stepper_regression.py OUT.npz
 
@@ -26,12 +27,12 @@ from cnt_env.sim.stepper import DragParams, Rod, RodMaterial
 from cnt_env.units import paper_groups
 
 
-def rod_case() -> dict:
+def rod_case(newton=None) -> dict:
     n = 40
     s = np.arange(n, dtype=float)
     nodes = np.stack([2.0 * np.sin(s / 9.0), 0.3 + s, 0.1 * np.cos(s / 5.0)], axis=1)
     rod = Rod(nodes, RodMaterial(k_s=6.6e3, k_b=1.0, k_t=1.0, rho=300.0, r0=0.02),
-              drag=DragParams(mu=1.0), max_nodes=n + 2)  # fmt: skip
+              drag=DragParams(mu=1.0), options=newton, max_nodes=n + 2)  # fmt: skip
     rod.fix_node(0)
     rod.fix_theta(0)
     rod.vdw[:] = (1.0, 0.5, 1.0, 0.05, 1.0)  # node 1 pulled down (forces.VDW_*)
@@ -55,13 +56,14 @@ def rod_case() -> dict:
             "rod_iterations": np.array(iters), "rod_halvings": np.array(rod.halvings)}  # fmt: skip
 
 
-def dep_case(name: str, preset: str, length: float) -> dict:
+def dep_case(name: str, preset: str, length: float, newton=None) -> dict:
+    extra = {} if newton is None else {"newton": newton}
     if preset == "coil":
         params = paper_groups("coil", Hbar=30.0, Ibar=200.0)
-        cfg = DepositionConfig(params=params, initial_radius=4.0)
+        cfg = DepositionConfig(params=params, initial_radius=4.0, **extra)
     else:
         params = paper_groups("serpentine", Hbar=30.0, delta_bar=1.0)
-        cfg = DepositionConfig(params=params, initial_radius=3.9, tail_length=40.0)
+        cfg = DepositionConfig(params=params, initial_radius=3.9, tail_length=40.0, **extra)
     sim = DepositionSim(cfg, seed=7)
     sim.run(length)
     st = sim.stats()
