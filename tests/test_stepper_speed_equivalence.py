@@ -1,14 +1,15 @@
 """Speed work on the stepper (issue 11) keeps the physics.
 
-* At the pre-issue-11 tolerance (residual_tol = 1e-8) the stepper is bit-identical to
-  the reference results in ``tests/data/stepper_regression.npz`` (generated at commit
-  9eb2b55, before the speed work, by ``tests/data/make_stepper_regression.py``): the
-  compiled step, the residual-only convergence check and the banded LU's skipping of
-  exact zeros change no bit.
-* The default tolerance (residual_tol = 1e-4) changes the result only far inside the
-  0.5% bar of the validation figures (benchmarks/RESULTS.md, "Issue 11: speed"), checked
-  here at a reduced scale: the same deposits, node for node, within 1e-3 L_vb, and the
-  pattern figures within 1e-4 relative.
+* The stepper is bit-identical to the reference results in
+  ``tests/data/stepper_regression.npz`` (generated at commit 9eb2b55, before the speed
+  work, by ``tests/data/make_stepper_regression.py``): the compiled step, the
+  residual-only convergence check and the banded LU's skipping of exact zeros change no
+  bit.
+* The looser Newton tolerance proposed for the deposition model (residual_tol = 1e-4
+  e_v instead of the default 1e-8) changes the result only far inside the 0.5% bar of
+  the validation figures (benchmarks/RESULTS.md, "Issue 11: speed"), checked here at a
+  reduced scale: the same deposits, node for node, within 1e-3 L_vb, and the pattern
+  figures within 1e-4 relative.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ _spec = importlib.util.spec_from_file_location(
 gen = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(gen)
 
-REFERENCE_TOL = NewtonOptions(residual_tol=1e-8)  # the tolerance at 9eb2b55
+REFERENCE_TOL = NewtonOptions(residual_tol=1e-8)  # the tolerance at 9eb2b55 (still the default)
 
 
 @pytest.fixture(scope="module")
@@ -75,8 +76,7 @@ def _small(preset: str, newton: NewtonOptions) -> DepositionConfig:
     ("coil", 150.0, ("coil_radius",)),
     ("serpentine", 120.0, ("amplitude", "wavelength")),
 ])  # fmt: skip
-def test_default_tolerance_keeps_the_figures(preset: str, length: float, keys: tuple) -> None:
-    assert NewtonOptions().residual_tol == 1e-4
+def test_loose_tolerance_keeps_the_figures(preset: str, length: float, keys: tuple) -> None:
     runs = {}
     for tol in (1e-8, 1e-4):
         sim = DepositionSim(_small(preset, NewtonOptions(residual_tol=tol)), seed=7)
