@@ -5,7 +5,7 @@
   work, by ``tests/data/make_stepper_regression.py``): the compiled step, the
   residual-only convergence check and the banded LU's skipping of exact zeros change no
   bit.
-* The looser Newton tolerance proposed for the deposition model (residual_tol = 1e-4
+* The looser Newton tolerance proposed for the deposition model (residual_tol = 1e-5
   e_v instead of the default 1e-8) changes the result only far inside the 0.5% bar of
   the validation figures (benchmarks/RESULTS.md, "Issue 11: speed"), checked here at a
   reduced scale: the same deposits, node for node, within 1e-3 L_vb, and the pattern
@@ -78,11 +78,11 @@ def _small(preset: str, newton: NewtonOptions) -> DepositionConfig:
 ])  # fmt: skip
 def test_loose_tolerance_keeps_the_figures(preset: str, length: float, keys: tuple) -> None:
     runs = {}
-    for tol in (1e-8, 1e-4):
+    for tol in (1e-8, 1e-5):
         sim = DepositionSim(_small(preset, NewtonOptions(residual_tol=tol)), seed=7)
         sim.run(length)
         runs[tol] = sim
-    a, b = runs[1e-8].trace(), runs[1e-4].trace()
+    a, b = runs[1e-8].trace(), runs[1e-5].trace()
     n = min(len(a), len(b))
     assert n >= 0.95 * length
     assert np.max(np.abs(a[:n] - b[:n])) < 1e-3  # L_vb, over the whole trace
@@ -94,4 +94,4 @@ def test_loose_tolerance_keeps_the_figures(preset: str, length: float, keys: tup
         assert mb[key] == pytest.approx(ma[key], rel=1e-4), key
     # and it is faster: fewer Newton iterations per step
     it = {t: s.rod.newton_iterations / s.rod.steps for t, s in runs.items()}
-    assert it[1e-4] < it[1e-8] - 0.3
+    assert it[1e-5] < it[1e-8] - 0.1

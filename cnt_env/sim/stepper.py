@@ -142,7 +142,7 @@ class NewtonOptions:
     """Tolerances of the Newton solve; each has one home, here."""
 
     # in units of force_scale (e_v in the dimensionless model). The deposition model can
-    # afford 1e-4 e_v (benchmarks/RESULTS.md, "Issue 11: speed";
+    # afford 1e-5 e_v (benchmarks/RESULTS.md, "Issue 11: speed";
     # tests/test_stepper_speed_equivalence.py); this default serves any force scale.
     residual_tol: float = 1e-8
     force_scale: float = 1.0
