@@ -206,7 +206,17 @@ def band_lu_factor(ab, n, ipiv):
         # scale multipliers, then rank-1 update of A[j+1 .. j+km, j+1 .. ju]
         usum = 0.0
         lj = ab[KV + 1 :, j]  # multipliers L[j+1 .., j]
-        if km == KL:
+        nonzero = False
+        for r in range(km):
+            if lj[r] != 0.0:  # NaN counts as non-zero
+                nonzero = True
+                break
+        if not nonzero:
+            # a column with nothing below the pivot (a fixed DOF, band_fix_dof): the
+            # multipliers are zero and the update would subtract exact zeros; skip it
+            for c in range(j + 1, ju + 1):
+                usum += abs(ab[KV + j - c, c])
+        elif km == KL:
             # interior columns: constant trip count, fully unrolled by LLVM
             for r in range(KL):
                 lj[r] *= pinv
@@ -251,6 +261,8 @@ def band_lu_solve(ab, n, ipiv, b):
         if p != j:
             b[p] = b[j]
             b[j] = bj
+        if bj == 0.0:  # nothing to eliminate (fixed DOFs have a zero right-hand side)
+            continue
         if j + KL < n:  # constant trip count: unrolled, ~2x faster
             for r in range(KL):
                 b[j + 1 + r] -= ab[KV + 1 + r, j] * bj
@@ -261,6 +273,8 @@ def band_lu_solve(ab, n, ipiv, b):
     for j in range(n - 1, -1, -1):
         xj = b[j] / ab[KV, j]
         b[j] = xj
+        if xj == 0.0:
+            continue
         if j >= KV:
             for r in range(KV):
                 b[j - KV + r] -= ab[r, j] * xj

@@ -48,7 +48,19 @@ from cnt_env.rod.banded import (
     band_lu_solve,
     band_zero,
 )
-from cnt_env.sim.forces import DRAG_LAWS, DRAG_LINEAR, add_linear_drag, add_printed_drag, add_vdw
+from cnt_env.sim.forces import (
+    DRAG_LAWS,
+    DRAG_LINEAR,
+    VDW_BETA0,
+    VDW_CLAMP,
+    VDW_DELTA,
+    VDW_ENERGY,
+    VDW_NODE,
+    add_linear_drag,
+    add_printed_drag,
+    add_vdw,
+    vdw_pull,
+)
 
 _DIAG = KL + KU
 
@@ -129,11 +141,17 @@ class DragParams:
 class NewtonOptions:
     """Tolerances of the Newton solve; each has one home, here."""
 
-    residual_tol: float = 1e-8  # in units of force_scale (e_v in the dimensionless model)
+    # in units of force_scale (e_v in the dimensionless model). The deposition model can
+    # afford 1e-5 e_v (benchmarks/RESULTS.md, "Issue 11: speed";
+    # tests/test_stepper_speed_equivalence.py); this default serves any force scale.
+    residual_tol: float = 1e-8
     force_scale: float = 1.0
     update_tol: float = 1e-12  # in units of the shortest rest length
     max_iter: int = 25
     max_halvings: int = 12
+    # Evaluate a residual that is expected to converge alone, before assembling J (the
+    # results are bit-identical either way; False is the pre-issue-11 cost, for A/B).
+    residual_check: bool = True
 
 
 @njit(cache=True)
@@ -226,6 +244,68 @@ def assemble(
 
 
 @njit(cache=True)
+def residual(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    twist: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    drag_law: int,
+    vdw: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    rhs: np.ndarray,
+) -> float:
+    """The residual part of :func:`assemble` alone: rhs = -f (zero on fixed DOFs), the
+    same floating-point operations in the same order, so the same bits; ``ab`` is not
+    touched. Returns max |f| over free DOFs."""
+    n_dof = 4 * n_nodes - 1
+    for k in range(n_dof):
+        force[k] = ext_force[k]
+    elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, False)
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False)
+    if drag_law == DRAG_LINEAR:
+        add_linear_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+        )
+    else:
+        add_printed_drag(
+            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+        )
+    node = int(vdw[VDW_NODE])
+    if node >= 0:  # forces.add_vdw without its Jacobian entry
+        kc = 4 * node + 1
+        f, _ = vdw_pull(q[kc], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
+        force[kc] += f
+    res = 0.0
+    for k in range(n_dof):
+        if fixed[k]:
+            rhs[k] = 0.0
+            continue
+        r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # docs/model.md §3
+        rhs[k] = -r
+        if not abs(r) <= res:  # also catches NaN
+            res = abs(r)
+    return res
+
+
+@njit(cache=True)
 def newton_solve(
     q: np.ndarray,
     q_old: np.ndarray,
@@ -268,20 +348,46 @@ def newton_solve(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
+    check: bool = True,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
     (tangents, d1, d2, ref_twist, ...) belong to the returned q. out_stats = [iterations,
-    final free residual]. Returns a status code (CONVERGED, ...)."""
+    final free residual, LU factorisations, residual-only evaluations]. Returns a status
+    code (CONVERGED, ...).
+
+    A residual that the last two are expected to bring below ``tol_abs`` (geometric
+    extrapolation; ``check``) is first evaluated alone (:func:`residual`, no Jacobian):
+    when it converges the Jacobian is not assembled, and when it does not, the full
+    assembly follows. Either way every iterate, residual and Jacobian is the same, bit
+    for bit, as with an assembly every iteration.
+    """
     n_dof = 4 * n_nodes - 1
     status = MAX_ITERATIONS
     it = 0
     res = math.inf
+    res_prev = math.inf
+    res_prev2 = math.inf
+    n_factor = 0
+    n_resid = 0
     while True:
         update_frames(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
                       d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
         if status == CONVERGED or it >= max_iter:
             break
+        # expected residual by geometric extrapolation of the last two: if it converges,
+        # evaluate it without the Jacobian first
+        if check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs:
+            res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
+                           voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
+                           flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+            n_resid += 1
+            if not math.isfinite(res):
+                status = NON_FINITE
+                break
+            if res <= tol_abs:
+                status = CONVERGED
+                break
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
                        flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
@@ -294,6 +400,7 @@ def newton_solve(
         if band_lu_factor(ab, n_dof, ipiv) != 0:
             status = SINGULAR
             break
+        n_factor += 1
         band_lu_solve(ab, n_dof, ipiv, rhs)
         du = 0.0
         for k in range(n_dof):
@@ -301,6 +408,8 @@ def newton_solve(
             if not abs(rhs[k]) <= du:
                 du = abs(rhs[k])
         it += 1
+        res_prev2 = res_prev
+        res_prev = res
         if not math.isfinite(du):
             status = NON_FINITE
             break
@@ -308,7 +417,91 @@ def newton_solve(
             status = CONVERGED  # frames are refreshed for this q at the loop top
     out_stats[0] = it
     out_stats[1] = res
+    out_stats[2] = n_factor
+    out_stats[3] = n_resid
     return status
+
+
+@njit(cache=True)
+def implicit_step(
+    q: np.ndarray,
+    u: np.ndarray,
+    q_old: np.ndarray,
+    u_old: np.ndarray,
+    n_nodes: int,
+    dt: float,
+    mass: np.ndarray,
+    fixed: np.ndarray,
+    rest_lengths: np.ndarray,
+    voronoi_lengths: np.ndarray,
+    k_s: float,
+    k_b: float,
+    k_t: float,
+    tangents_old: np.ndarray,
+    d1_old: np.ndarray,
+    ref_twist_old: np.ndarray,
+    ext_force: np.ndarray,
+    drag_on: np.ndarray,
+    flow: np.ndarray,
+    mu: float,
+    sigma: float,
+    c_sigma: float,
+    drag_law: int,
+    vdw: np.ndarray,
+    tol_abs: float,
+    update_tol: float,
+    max_iter: int,
+    tangents: np.ndarray,
+    lengths: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    m1: np.ndarray,
+    m2: np.ndarray,
+    kb: np.ndarray,
+    kappa: np.ndarray,
+    twist: np.ndarray,
+    ref_twist: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    ipiv: np.ndarray,
+    rhs: np.ndarray,
+    out_stats: np.ndarray,
+    check: bool,
+) -> int:
+    """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
+    step start, predict q_n + dt u_n on free DOFs, solve; commit (u, start-of-step
+    frames) on success or restore q and u on failure."""
+    n_dof = 4 * n_nodes - 1
+    for k in range(n_dof):
+        q_old[k] = q[k]
+        u_old[k] = u[k]
+    for k in range(n_dof):
+        if fixed[k] == 0:
+            q[k] += dt * u[k]
+    min_rest = rest_lengths[0]
+    for j in range(1, n_nodes - 1):
+        if rest_lengths[j] < min_rest:
+            min_rest = rest_lengths[j]
+    status = newton_solve(
+        q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s, k_b,
+        k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
+        c_sigma, drag_law, vdw, tol_abs, update_tol * min_rest, max_iter, tangents, lengths,
+        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, check,
+    )  # fmt: skip
+    if status != CONVERGED:
+        for k in range(n_dof):
+            q[k] = q_old[k]
+            u[k] = u_old[k]
+        return status
+    for k in range(n_dof):
+        u[k] = (q[k] - q_old[k]) / dt
+    for j in range(n_nodes - 1):
+        for c in range(3):
+            tangents_old[j, c] = tangents[j, c]
+            d1_old[j, c] = d1[j, c]
+    for i in range(n_nodes):
+        ref_twist_old[i] = ref_twist[i]
+    return CONVERGED
 
 
 class Rod:
@@ -362,6 +555,7 @@ class Rod:
         self.steps = 0
         self.newton_iterations = 0
         self.halvings = 0
+        self.lu_factorisations = 0
 
         for i in range(n):
             self.q[4 * i : 4 * i + 3] = nodes[i]
@@ -412,7 +606,7 @@ class Rod:
                 arr[:m] = prev[:m]
             setattr(self, name, arr)
         self._ab = band_alloc(n_dof_cap)
-        self._stats = np.zeros(2)
+        self._stats = np.zeros(4)
         self.max_nodes = cap
 
     def append_node(self, position: np.ndarray, velocity: np.ndarray, rest_length: float) -> None:
@@ -587,28 +781,22 @@ class Rod:
 
     # ---- stepping -------------------------------------------------------------
     def _try_step(self, dt: float) -> int:
-        """Attempt one step of size dt. On success commit it; on failure restore."""
-        nd = self.n_dof
+        """Attempt one step of size dt. On success commit it; on failure restore.
+
+        The whole attempt (save, predict, Newton, commit or restore) is one compiled
+        call, :func:`implicit_step`."""
         n = self.n_nodes
-        self._q_old[:nd] = self.q[:nd]
-        self._u_old[:nd] = self.u[:nd]
-        # explicit predictor for free DOFs (fixed DOFs keep their prescribed values)
-        free = self.fixed[:nd] == 0
-        self.q[:nd][free] += dt * self.u[:nd][free]
         try:
             status = self._newton(n, dt)
         except ZeroDivisionError:  # numba's error model: a degenerate edge (zero length)
-            status = NON_FINITE
-        self.newton_iterations += int(self._stats[0])
-        if status != CONVERGED:
+            nd = self.n_dof
             self.q[:nd] = self._q_old[:nd]
             self.u[:nd] = self._u_old[:nd]
+            return NON_FINITE
+        self.newton_iterations += int(self._stats[0])
+        self.lu_factorisations += int(self._stats[2])
+        if status != CONVERGED:
             return status
-        self.u[:nd] = (self.q[:nd] - self._q_old[:nd]) / dt
-        ne = n - 1
-        self.tangents_old[:ne] = self._tangents[:ne]
-        self.d1_old[:ne] = self._d1[:ne]
-        self.ref_twist_old[:n] = self._ref_twist[:n]
         self.time += dt
         self.steps += 1
         return CONVERGED
@@ -616,17 +804,16 @@ class Rod:
     def _newton(self, n: int, dt: float) -> int:
         m, d, o = self.material, self.drag, self.options
         self._stats[:] = 0.0
-        return newton_solve(
-            self.q, self._q_old, self._u_old, n, dt, self.mass, self.fixed,
-            self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b, m.k_t,
-            self.tangents_old, self.d1_old, self.ref_twist_old,
-            self.ext_force, self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
-            o.residual_tol * o.force_scale,
-            o.update_tol * float(np.min(self.rest_lengths[: n - 1])),
-            o.max_iter,
+        return implicit_step(
+            self.q, self.u, self._q_old, self._u_old, n, dt,
+            self.mass, self.fixed, self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b,
+            m.k_t, self.tangents_old, self.d1_old, self.ref_twist_old, self.ext_force,
+            self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
+            o.residual_tol * o.force_scale, o.update_tol, o.max_iter,
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
+            o.residual_check,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
@@ -663,6 +850,7 @@ class Rod:
             "vdw": self.vdw.copy(), "voronoi_lengths": self.voronoi_lengths.copy(),
             "mass": self.mass.copy(), "time": self.time, "steps": self.steps,
             "newton_iterations": self.newton_iterations, "halvings": self.halvings,
+            "lu_factorisations": self.lu_factorisations,
         }  # fmt: skip
 
     def restore(self, snap: dict) -> None:
@@ -684,5 +872,7 @@ __all__ = [
     "Rod",
     "RodMaterial",
     "SimulationError",
+    "implicit_step",
     "newton_solve",
+    "residual",
 ]
