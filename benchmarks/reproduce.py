@@ -51,6 +51,28 @@ CANDIDATES: dict[str, dict[str, Any]] = {
         "tail_clamp": "xyz",
         "contact_mode": "project",
     },
+    "C": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "C_penalty": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "penalty",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "C_tail60": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+        "tail_length": 60.0,
+    },
     "printed_C": {
         "drag_law": "printed",
         "sliding": "C",
@@ -80,18 +102,25 @@ CANDIDATES: dict[str, dict[str, Any]] = {
         "friction": 0.0,
         "tail_clamp": "xy",
     },
-    "B_free_penalty": {
+    "B_penalty": {
         "drag_law": "linear",
         "sliding": "B",
         "snap": "penalty",
         "friction": 0.0,
-        "tail_clamp": "xy",
+        "tail_clamp": "xyz",
     },
-    "B_free_constraint": {
+    "B_constraint": {
         "drag_law": "linear",
         "sliding": "B",
         "snap": "constraint",
         "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "B_friction10": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 10.0,
         "tail_clamp": "xy",
     },
     "B_friction1": {
@@ -126,21 +155,21 @@ def rows(quick: bool = False) -> dict[str, list[dict[str, Any]]]:
             "vbar": [_pt("vbar", SERP, vbar=v) for v in (0.037, 0.12)],
             "phi": [_pt("phi", SERP, phi=1.2)],
         }
+    # in priority order: a run cut short by --max-wall has the paper's headline rows
     out: dict[str, list[dict[str, Any]]] = {}
-    out["coil"] = (
-        [_pt("coil", COIL)]
-        + [_pt("coil", COIL, Hbar=h) for h in (150.0, 400.0)]
-        + [_pt("coil", COIL, Ibar=i) for i in (700.0, 7000.0)]
-    )
-    out["vbar"] = [_pt("vbar", SERP, vbar=v) for v in (0.005, 0.019, 0.037, 0.05, 0.07, 0.1, 0.12)]
+    out["coil"] = [_pt("coil", COIL)]
+    out["vbar"] = [_pt("vbar", SERP, vbar=v) for v in (0.037, 0.019, 0.07, 0.12, 0.005, 0.05, 0.1)]
+    out["phi"] = [_pt("phi", SERP, phi=f) for f in (1.2, 0.87, 1.45, 0.44)]
     out["phase"] = [
         _pt("phase", SERP, kappa_c_bar=k, vbar=v)
         for k in (0.1, 0.15)
-        for v in (0.019, 0.037, 0.07, 0.12)
+        for v in (0.037, 0.019, 0.07, 0.12)
     ]
-    out["phi"] = [_pt("phi", SERP, phi=f) for f in (0.44, 0.87, 1.2, 1.45)]
     out["Hbar"] = [_pt("Hbar", SERP, Hbar=h) for h in (100.0, 250.0)]
     out["Ibar"] = [_pt("Ibar", SERP, Ibar=i) for i in (100.0, 1000.0)]
+    out["coil_groups"] = [_pt("coil_groups", COIL, Hbar=h) for h in (150.0, 400.0)] + [
+        _pt("coil_groups", COIL, Ibar=i) for i in (700.0, 7000.0)
+    ]
     return out
 
 
@@ -151,6 +180,12 @@ STUDY_POINTS = (
     + [_pt("vbar", SERP, vbar=0.07), _pt("phi", SERP, phi=0.87), _pt("phi", SERP, phi=0.44)]
     + [_pt("phase", SERP, kappa_c_bar=k, vbar=0.037) for k in (0.1, 0.15)]
 )
+#: the discretisation finding: the baseline at finer delta (uniform 0.5; graded 0.125 near
+#: the contact as on the coil preset, 1 above)
+DELTA_POINTS = [
+    _pt("delta", SERP, delta_bar=0.5),
+    _pt("delta", SERP, delta_bar=0.125, coarse_delta=1.0),
+]
 
 #: What the paper gives (physics.md §6): (row, key) -> (quantity, value, note)
 PAPER: list[tuple[str, dict[str, float], str, float, str]] = [
@@ -328,6 +363,89 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _get(recs: list[dict[str, Any]], **want: float) -> dict[str, Any] | None:
+    base = {"vbar": 0.037, "phi": 0.0, "kappa_c_bar": 0.2, "Hbar": 155.0, "Ibar": 300.0}
+    want = {**base, **want}
+    for r in recs:
+        if r["preset"] == SERP and all(abs((r[k] or 0) - v) < 1e-9 for k, v in want.items()):
+            return r
+    return None
+
+
+_SHORT = {"serpentine-coil": "SC", "periodic-serpentine": "P", "too_short": "TS",
+          "irregular-serpentine": "I"}  # fmt: skip
+
+
+def study_table(records: list[dict[str, Any]]) -> str:
+    """Candidate x row: A / lambda_x / class at each study point, and the checks."""
+    cands = sorted({r["candidate"] for r in records}, key=list(CANDIDATES).index)
+    cols = [("vbar", 0.019), ("vbar", 0.037), ("vbar", 0.07), ("vbar", 0.12),
+            ("phi", 0.44), ("phi", 0.87), ("phi", 1.2),
+            ("kappa_c_bar", 0.1), ("kappa_c_bar", 0.15)]  # fmt: skip
+    head = " | ".join(f"{k.split('_')[0]}={v:g}" for k, v in cols)
+    lines = [f"| candidate | {head} | checks passed |", "|---" * (len(cols) + 2) + "|"]
+    for c in cands:
+        recs = [r for r in records if r["candidate"] == c]
+        cells = []
+        for k, v in cols:
+            r = _get(recs, **{k: v})
+            if r is None:
+                cells.append("")
+                continue
+            cls = _SHORT.get(r["pattern"], r["pattern"])
+            cells.append(f"{_fmt(r['amplitude'])} / {_fmt(r['wavelength_x'])} {cls}")
+        ok, total = _checks(recs)
+        lines.append(f"| {c} | " + " | ".join(cells) + f" | {ok}/{total} |")
+    lines += ["", "Cells: A / lambda along x, class (SC serpentine-coil, P periodic, I irregular,",
+              "TS too short to judge).", "", "Checks:"]  # fmt: skip
+    lines += [f"- {name}" for name, _ in CHECKS]
+    return "\n".join(lines) + "\n"
+
+
+def _val(r: dict[str, Any] | None, key: str) -> float:
+    v = None if r is None else r.get(key)
+    return math.nan if v is None else float(v)
+
+
+def _within(x: float, target: float, rel: float = 0.25) -> bool:
+    return abs(x / target - 1.0) <= rel
+
+
+CHECKS: list[tuple[str, Any]] = [
+    ("baseline A in 26-33", lambda g: 26 <= _val(g(), "amplitude") <= 33),
+    ("baseline lambda in 6.3-8.3", lambda g: 6.3 <= _val(g(), "wavelength_x") <= 8.3),
+    ("A falls 0.019 -> 0.037 -> 0.07",
+     lambda g: _val(g(vbar=0.019), "amplitude") > _val(g(), "amplitude")
+     > _val(g(vbar=0.07), "amplitude")),
+    ("lambda rises 0.019 -> 0.037 -> 0.12",
+     lambda g: _val(g(vbar=0.019), "wavelength_x") < _val(g(), "wavelength_x")
+     < _val(g(vbar=0.12), "wavelength_x")),
+    ("A(0.07) within 25% of 25", lambda g: _within(_val(g(vbar=0.07), "amplitude"), 25.0)),
+    ("lambda(0.12) within 25% of 25",
+     lambda g: _within(_val(g(vbar=0.12), "wavelength_x"), 25.0)),
+    ("A rises with phi (0 -> 0.87 -> 1.2)",
+     lambda g: _val(g(), "amplitude") < _val(g(phi=0.87), "amplitude")
+     < _val(g(phi=1.2), "amplitude")),
+    ("lambda_x falls with phi (0 -> 0.87 -> 1.2)",
+     lambda g: _val(g(), "wavelength_x") > _val(g(phi=0.87), "wavelength_x")
+     > _val(g(phi=1.2), "wavelength_x")),
+    ("A, lambda at kappa_c 0.1 and 0.15 within 25% of kappa_c 0.2 (collapse)",
+     lambda g: all(_within(_val(g(kappa_c_bar=k), q), _val(g(), q))
+                   for k in (0.1, 0.15) for q in ("amplitude", "wavelength_x"))),
+    ("classes: serpentine-coil at 0.019, periodic at 0.037, irregular at 0.12",
+     lambda g: (g(vbar=0.019) or {}).get("pattern") == "serpentine-coil"
+     and (g() or {}).get("pattern") == "periodic-serpentine"
+     and (g(vbar=0.12) or {}).get("pattern") == "irregular-serpentine"),
+]  # fmt: skip
+
+
+def _checks(recs: list[dict[str, Any]]) -> tuple[int, int]:
+    def g(**kw: float) -> dict[str, Any] | None:
+        return _get(recs, **kw)
+
+    return sum(bool(fn(g)) for _, fn in CHECKS), len(CHECKS)
+
+
 def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     import matplotlib
 
@@ -391,6 +509,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="a handful of short points (CI)")
     ap.add_argument("--only", action="append", help="run only this row (repeatable)")
     ap.add_argument("--study", action="store_true", help="the configuration-study points")
+    ap.add_argument("--delta", action="store_true", help="the delta finding points")
     ap.add_argument(
         "--study-points",
         type=int,
@@ -411,7 +530,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.jobs < 1:
         ap.error("--jobs must be >= 1")
     deposit = args.deposit if args.deposit is not None else (300.0 if args.quick else None)
-    if args.study:
+    if args.delta:
+        table = {"delta": list(DELTA_POINTS)}
+    elif args.study:
         table = {"study": list(STUDY_POINTS)[: args.study_points]}
     else:
         table = rows(args.quick)
@@ -462,6 +583,8 @@ def main(argv: list[str] | None = None) -> int:
             submit()
     wall = time.time() - t0
     records = list(load_done(results).values())
+    if args.study:
+        (out / "study_table.md").write_text(study_table(records))
     for c in candidates:
         text = summary(records, c)
         text += f"\nWall time of this invocation: {wall:.0f} s with --jobs {args.jobs}.\n"

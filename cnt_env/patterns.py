@@ -178,6 +178,11 @@ class MeasureOptions:
             this fraction of the measured arc length.
         coil_min_turn_sign_fraction: a coil needs at least this fraction of its
             accepted windows to turn the same way (turning "about monotone").
+        coil_loose_rel_residual: for the class only, a window counts towards the
+            coil coverage when it is one turn of a circle (turning and length tests)
+            with an RMS residual up to this fraction of its radius: a coil whose centre
+            still drifts (a loose start-up coil) is a coil; its radius comes from the
+            strict windows only.
         rough_turning_angle: median turning angle per vertex (rad) above which the
             trace is too rough to be a rod trace (noise, random walk): "unknown".
         crossing_pair_budget: most candidate segment pairs examined for
@@ -198,6 +203,7 @@ class MeasureOptions:
     coil_max_rel_spread: float = 0.10
     coil_min_coverage: float = 0.8
     coil_min_turn_sign_fraction: float = 0.9
+    coil_loose_rel_residual: float = 0.25
     rough_turning_angle: float = 0.25 * math.pi
     crossing_pair_budget: int = 2_000_000
 
@@ -215,6 +221,7 @@ class MeasureOptions:
         _check_float("coil_max_rel_spread", self.coil_max_rel_spread)
         _check_float("coil_min_coverage", self.coil_min_coverage, upper=1.0)
         _check_float("coil_min_turn_sign_fraction", self.coil_min_turn_sign_fraction, upper=1.0)
+        _check_float("coil_loose_rel_residual", self.coil_loose_rel_residual)
         _check_float("rough_turning_angle", self.rough_turning_angle, upper=math.pi)
         _check_int("crossing_pair_budget", self.crossing_pair_budget)
 
@@ -447,6 +454,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         "radii": empty,
         "window_length": float(window),
         "coverage": 0.0,
+        "loose_coverage": 0.0,
         "turn_sign_fraction": math.nan,
     }
     if not math.isfinite(window) or window > total:
@@ -473,9 +481,8 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         _, _, radius[b0:b1], rms[b0:b1] = _fit_circles(p[idx, 0], p[idx, 1], mask)
     turning = heading[i1 - 1] - heading[i0]
     with np.errstate(invalid="ignore", divide="ignore"):
-        accepted = (
+        one_turn = (
             np.isfinite(radius)
-            & (rms <= options.coil_max_rel_residual * radius)
             # a window of one turn must turn by about 2 pi and be about one
             # circumference long; a big circle through a meander is neither
             & (np.abs(turning) >= math.pi * options.coil_window_turns)
@@ -484,6 +491,8 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
                 <= _TURN_LENGTH_TOLERANCE
             )
         )
+        accepted = one_turn & (rms <= options.coil_max_rel_residual * radius)
+        loose = one_turn & (rms <= options.coil_loose_rel_residual * radius)
     radii = radius[accepted]
     result["n_windows"] = n_win
     result["n_rejected"] = int(n_win - radii.size)
@@ -496,6 +505,10 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         result["coverage"] = min(1.0, covered / total)
         signs = np.sign(turning[accepted])
         result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+    if loose.any():
+        l_starts = starts[loose]
+        covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
+        result["loose_coverage"] = min(1.0, covered / total)
     return result
 
 
@@ -894,7 +907,7 @@ def _pattern(
         p16, p84 = coil["spread"]
         if (
             (p84 - p16) / (2.0 * median) < options.coil_max_rel_spread
-            and coil["coverage"] >= options.coil_min_coverage
+            and coil["loose_coverage"] >= options.coil_min_coverage
             and coil["turn_sign_fraction"] >= options.coil_min_turn_sign_fraction
         ):
             return "coil"
@@ -966,6 +979,7 @@ def measure(
         "coil_n_windows": int(coil["n_windows"]),
         "coil_n_rejected": int(coil["n_rejected"]),
         "coil_coverage": float(coil["coverage"]),
+        "coil_loose_coverage": float(coil["loose_coverage"]),
         "amplitude": float(serp["amplitude"]),
         "peak_to_peak": float(serp["peak_to_peak"]),
         "amplitude_spread": [float(v) for v in serp["amplitude_spread"]],
@@ -999,8 +1013,10 @@ def classify(
     1. ``"unknown"`` if the median turning angle per vertex exceeds
        ``rough_turning_angle``: too rough for a rod trace (noise, random walk).
     2. ``"too_short"`` if the measured arc is shorter than ``min_judged_length``.
-    3. ``"coil"``: accepted coil windows (:func:`coil_radius`) cover at least
-       ``coil_min_coverage`` of the measured arc length, their relative spread
+    3. ``"coil"``: windows that are one turn of a circle with a residual up to
+       ``coil_loose_rel_residual`` (a loose, drifting coil counts) cover at least
+       ``coil_min_coverage`` of the measured arc length; the accepted windows
+       (:func:`coil_radius`) have a relative spread
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
        ``coil_min_turn_sign_fraction`` of them turn the same way.
     4. On the ``"stepped"`` substrate, with at least two U-turns:

@@ -20,17 +20,34 @@ __all__ = [
     "ENV_SIM_DEFAULTS",
     "INITIAL_RADIUS",
     "MESH",
+    "MODEL",
     "PRESETS",
     "RUN_DEPOSIT",
     "RUN_TRANSIENT",
     "mesh_for",
 ]
 
-#: Validated mesh and start-up arc per preset. coil: delta = 0.125 near the contact
-#: (graded, coarse 1 above) puts R0 at 7.64 L_vb; serpentine: uniform delta = 1 gives the
-#: paper's amplitude and wavelength at the baseline.
+#: The model configuration, one for both substrates (issue 12, benchmarks/RESULTS.md
+#: "Issue 12: one configuration, the paper's trends"): the paper's printed drag law
+#: (eq. 2), deposited nodes free in x and z until their edge snaps into the steps
+#: (sliding "C"), the snap applied between steps ("jump"), no substrate friction beyond
+#: the gas drag, and the far deposited tail clamped in x, y and z. DepositionConfig takes
+#: its defaults from here; the other candidates of the study stay named options.
+MODEL: MappingProxyType[str, Any] = MappingProxyType({
+    "drag_law": "printed",
+    "sliding": "C",
+    "snap": "jump",
+    "friction": 0.0,
+    "tail_clamp": "xyz",
+    "tail_length": 195.0,
+})  # fmt: skip
+
+#: Mesh and start-up arc per preset: one discretisation for both, delta = L_vb (the
+#: paper's delta ~ L_vb). With MODEL it gives R0 = 7.92 (+3.7%) on the coil; the linear
+#: drag law needs delta = 0.125 (graded) for 7.64, a mesh the serpentine cannot afford
+#: (RESULTS.md, issue 12).
 MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
-    "coil": MappingProxyType({"delta_bar": 0.125, "coarse_delta": 1.0, "initial_radius": 6.4}),
+    "coil": MappingProxyType({"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 6.4}),
     "serpentine": MappingProxyType(
         {"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 3.9}
     ),

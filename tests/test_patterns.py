@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -516,6 +517,7 @@ def test_trace_too_short_after_transient() -> None:
         {"serpentine_coil_min_loops": 0},
         {"min_judged_cycles": 1.5},
         {"min_judged_length": math.nan},
+        {"coil_loose_rel_residual": 0.0},
     ],
 )
 def test_invalid_options(kwargs: dict[str, object]) -> None:
@@ -533,3 +535,39 @@ def test_invalid_arguments() -> None:
             serpentine_measures(trace, flow_direction=bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="options"):
         measure(trace, options={"transient_length": 0.0})  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- real traces
+
+REAL = Path(__file__).parent / "data" / "real_traces.npz"
+
+
+@pytest.mark.parametrize(
+    ("name", "pattern"),
+    [
+        ("serpentine_vbar_0p01", "serpentine-coil"),  # loops at most U-turns
+        ("serpentine_vbar_0p037", "periodic-serpentine"),
+        ("serpentine_vbar_0p13", "periodic-serpentine"),
+    ],
+)
+def test_real_sweep_traces(name: str, pattern: str) -> None:
+    """Traces of the simulator's vbar sweep (benchmarks/results/sweep_vbar, linear drag,
+    sliding B; stored as float32 (x, z)), measured as the sweep measures them."""
+    trace = np.load(REAL)[name].astype(np.float64)
+    result = measure(trace, MeasureOptions(transient_length=150.0), substrate="stepped")
+    assert result["pattern"] == pattern
+
+
+def test_real_coil_with_a_drifting_start_is_a_coil() -> None:
+    """A simulated coil (printed drag, delta = 1, 800 L_vb, 240 dropped) whose centre
+    still drifts over its first ~200 L_vb (circle-fit residuals 5-20% of the radius):
+    it is a coil, and its radius comes from the clean windows only (issue 12)."""
+    trace = np.load(REAL)["coil_delta1_printed"].astype(np.float64)
+    result = measure(trace, MeasureOptions(transient_length=240.0))
+    assert result["coil_coverage"] < 0.8  # the strict windows alone would not call it
+    assert result["coil_loose_coverage"] >= 0.8
+    assert result["pattern"] == "coil"
+    assert result["coil_radius"] == pytest.approx(7.90, abs=0.03)
+    # a serpentine's windows are not one turn of a circle, however loose
+    serp = measure(serpentine_trace(), substrate="stepped")
+    assert serp["coil_loose_coverage"] < 0.2

@@ -104,3 +104,20 @@ def test_friction_changes_the_trace_and_is_deterministic() -> None:
     k = 4 * np.arange(1, a.n_deposited)
     assert np.all(a.rod.sub_friction[k + 2] > 0)
     assert not a.rod.sub_friction[4 * a.n_deposited + 4 :].any()
+
+
+@pytest.mark.parametrize(("clamp", "z_fixed"), [("xyz", 1), ("xy", 0)])
+def test_tail_clamp(clamp: str, z_fixed: int) -> None:
+    """The oldest retained node is clamped in x, y and, unless tail_clamp is "xy", z."""
+    sim = _small(tail_clamp=clamp, tail_length=8.0)
+    sim.run(20.0)
+    assert sim.n_trace > sim.n_deposited  # the far tail has left the solve
+    assert sim.rod.fixed[0] == 1 and sim.rod.fixed[1] == 1
+    assert sim.rod.fixed[2] == z_fixed
+
+
+def test_no_sliding_fixes_deposited_nodes() -> None:
+    sim = _small(sliding="none")
+    sim.run(15.0)
+    k = 4 * np.arange(sim.n_deposited)
+    assert np.all(sim.rod.fixed[k] == 1) and np.all(sim.rod.fixed[k + 2] == 1)

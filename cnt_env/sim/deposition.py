@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from cnt_env.presets import MODEL
 from cnt_env.sim.forces import (
     VDW_BETA0,
     VDW_CLAMP,
@@ -78,10 +79,12 @@ class ContactOptions:
 class DepositionConfig:
     """Everything that defines a deposition run, in dimensionless units.
 
-    ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and
-    sticky when ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B" or
-    "C") and ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
-    serpentine preset) apply to the stepped one (substrate.py).
+    The model defaults come from ``presets.MODEL`` (issue 12's choice). ``drag_law`` is
+    ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and sticky when
+    ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B", "C" or "none"),
+    ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
+    serpentine preset), ``friction``, ``snap``, ``snap_stiffness`` and ``tail_clamp``
+    apply to the stepped one (substrate.Stepped documents each).
 
     Graded discretisation [choice, physics.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
@@ -101,13 +104,13 @@ class DepositionConfig:
     perturbation: float = 1e-3
     coarse_delta: float | None = None
     fine_length: float = 20.0
-    drag_law: str = "linear"
-    sliding: str = "B"
-    tail_length: float = 195.0
-    friction: float = 0.0
-    snap: str = "jump"
+    drag_law: str = MODEL["drag_law"]
+    sliding: str = MODEL["sliding"]
+    tail_length: float = MODEL["tail_length"]
+    friction: float = MODEL["friction"]
+    snap: str = MODEL["snap"]
     snap_stiffness: float = 1.0e4
-    tail_clamp: str = "xyz"
+    tail_clamp: str = MODEL["tail_clamp"]
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
 
