@@ -300,6 +300,42 @@ def run_point(
     return {"record": rec, "trace": np.asarray(trace[:, [0, 2]], dtype=np.float32)}
 
 
+def remeasure(out: Path) -> int:
+    """Re-measure every point whose trace is stored (after a change to patterns.py),
+    rewriting results.jsonl in place. Returns the number of points re-measured."""
+    import numpy as np
+
+    from cnt_env.patterns import MeasureOptions, measure
+
+    path = out / "results.jsonl"
+    recs = list(load_done(path).values())
+    n = 0
+    for rec in recs:
+        name = rec["key"].replace("|", "__").replace(",", "_")
+        f = out / "traces" / f"{name}.npy"
+        if not f.exists():
+            continue
+        trace = np.load(f).astype(np.float64)
+        opts = MeasureOptions(transient_length=rec["transient"])
+        sub = "flat" if rec["preset"] == COIL else "stepped"
+        m = measure(trace, opts, sub, flow_direction=(1.0, 0.0))
+
+        def f_(x: Any) -> Any:
+            return None if isinstance(x, float) and not math.isfinite(x) else x
+
+        rec.update(
+            pattern=m["pattern"], coil_radius=f_(m["coil_radius"]),
+            amplitude=f_(m["amplitude"]), amplitude_cv=f_(m["amplitude_cv"]),
+            wavelength_x=f_(m["wavelength"]), wavelength_cv=f_(m["wavelength_cv"]),
+            wavelength_prog=f_(m["wavelength_progression"]), n_cycles=m["n_cycles"],
+            n_loops=m["n_loops"], n_self_crossings=m["n_self_crossings"],
+            loop_density=f_(m["loop_density"]),
+        )  # fmt: skip
+        n += 1
+    path.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    return n
+
+
 def load_done(path: Path) -> dict[str, dict[str, Any]]:
     done: dict[str, dict[str, Any]] = {}
     if path.exists():
@@ -326,7 +362,8 @@ def _match(rec: dict[str, Any], row: str, groups: dict[str, float]) -> bool:
 
 
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
-    recs = [r for r in records if r["candidate"] == candidate]
+    every = [r for r in records if r["candidate"] == candidate]
+    recs = [r for r in every if "|dt=" not in r["key"]]  # the default resolution
     lines = [f"# Reproduction: candidate `{candidate}`", ""]
     lines += [
         "## Model against paper",
@@ -340,7 +377,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
             lines.append(f"| {note} | {value:g} | not run | |")
             continue
         v = hits[0][qty]
-        lines.append(f"| {note} | {value:g} | {v:.2f} | {100 * (v / value - 1):+.0f}% |")
+        lines.append(f"| {note} | {value:g} | {v:.2f} | {100 * (v / value - 1):+.1f}% |")
     for groups, cls in PAPER_CLASS:
         hits = [r for r in recs if _match(r, "vbar", groups)]
         got = hits[0]["pattern"] if hits else "not run"
@@ -358,6 +395,20 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
             f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
             f"{r['wall_s']} | {r['error'] or ''} |"
         )
+    other = [r for r in every if "|dt=" in r["key"]]
+    if other:
+        lines += ["", "## Other time steps (same points, dt_factor changed)", "",
+                  "| point | dt_factor | A | lambda_x | A at default | lambda_x at default |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for r in other:
+            base = [b for b in recs if b["key"] == r["key"].split("|dt=")[0]]
+            b = base[0] if base else {"amplitude": None, "wavelength_x": None}
+            g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
+            lines.append(
+                f"| {r['preset']} {g} | {r['dt_factor']:g} | {_fmt(r['amplitude'])} | "
+                f"{_fmt(r['wavelength_x'])} | {_fmt(b['amplitude'])} | "
+                f"{_fmt(b['wavelength_x'])} |"
+            )
     total = sum(r["wall_s"] for r in recs)
     lines += ["", f"Sum of per-point wall times: {total:.0f} s ({len(recs)} points)."]
     return "\n".join(lines) + "\n"
@@ -367,7 +418,9 @@ def _get(recs: list[dict[str, Any]], **want: float) -> dict[str, Any] | None:
     base = {"vbar": 0.037, "phi": 0.0, "kappa_c_bar": 0.2, "Hbar": 155.0, "Ibar": 300.0}
     want = {**base, **want}
     for r in recs:
-        if r["preset"] == SERP and all(abs((r[k] or 0) - v) < 1e-9 for k, v in want.items()):
+        if r["preset"] != SERP or r["row"] == "delta" or r["delta_bar"] != 1.0:
+            continue
+        if all(abs((r[k] or 0) - v) < 1e-9 for k, v in want.items()):
             return r
     return None
 
@@ -452,7 +505,11 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    recs = [r for r in records if r["candidate"] == candidate and r["preset"] == SERP]
+    recs = [
+        r
+        for r in records
+        if r["candidate"] == candidate and r["preset"] == SERP and "|dt=" not in r["key"]
+    ]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
     by_k: dict[float, list[dict[str, Any]]] = {}
@@ -522,6 +579,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/reproduce")
     ap.add_argument("--max-wall", type=float, default=None, help="stop submitting after S s")
     ap.add_argument("--no-traces", action="store_true")
+    ap.add_argument(
+        "--remeasure", action="store_true",
+        help="re-measure the stored traces, rewrite the summary and figures, run nothing",
+    )  # fmt: skip
     args = ap.parse_args(argv)
     candidates = args.candidate or ["default"]
     for c in candidates:
@@ -545,6 +606,9 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     results = out / "results.jsonl"
+    if args.remeasure:
+        print(f"re-measured {remeasure(out)} points", flush=True)
+        table = {}
     done = load_done(results)
     todo = [(p, c) for c in candidates for row in table.values() for p in row
             if point_key(p, c, args.dt_factor) not in done]  # fmt: skip
@@ -587,7 +651,8 @@ def main(argv: list[str] | None = None) -> int:
         (out / "study_table.md").write_text(study_table(records))
     for c in candidates:
         text = summary(records, c)
-        text += f"\nWall time of this invocation: {wall:.0f} s with --jobs {args.jobs}.\n"
+        if not args.remeasure:
+            text += f"\nWall time of this invocation: {wall:.0f} s with --jobs {args.jobs}.\n"
         (out / f"summary_{c}.md").write_text(text)
         try:
             figures(records, c, out)
