@@ -71,8 +71,10 @@ RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 300.0, "
 DEMO_DEPOSIT: float = 300.0
 
 #: Simulator settings of the env on the stepped substrate, for speed (RESULTS.md,
-#: serpentine suite, case env_fast): 4x the validated step (amplitude -0.2%, wavelength
-#: +4.7%) and 60 L_vb of deposited tail kept in the solve instead of 195.
+#: serpentine suite, case env_fast): 4x the validated step and 60 L_vb of deposited tail
+#: kept in the solve instead of 195. Validated for the issue-4 model (linear, sliding B:
+#: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb tail alone moves A and
+#: lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12 (RESULTS.md, issue 12).
 ENV_SIM_DEFAULTS: MappingProxyType[str, Any] = MappingProxyType(
     {"dt_factor": 0.2, "tail_length": 60.0}
 )
