@@ -43,7 +43,7 @@ MODEL: MappingProxyType[str, Any] = MappingProxyType({
 })  # fmt: skip
 
 #: Mesh and start-up arc per preset: one discretisation for both, delta = L_vb (the
-#: paper's delta ~ L_vb). With MODEL it gives R0 = 7.92 (+3.7%) on the coil; the linear
+#: paper's delta ~ L_vb). With MODEL it gives R0 = 7.90 (+3.4%) on the coil; the linear
 #: drag law needs delta = 0.125 (graded) for 7.64, a mesh the serpentine cannot afford
 #: (RESULTS.md, issue 12).
 MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
