@@ -78,6 +78,7 @@ PATTERNS: tuple[str, ...] = (
     "periodic-serpentine",
     "irregular-serpentine",
     "straight",
+    "too_short",
     "unknown",
 )
 SUBSTRATES: tuple[str, ...] = ("flat", "stepped")
@@ -113,6 +114,9 @@ _PAIR_CHUNK = 1_000_000
 # Grid cell = this many median segment lengths; segments whose bounding box
 # covers more cells than _LONG_SEGMENT_CELLS are tested against all segments.
 _CELL_SEGMENTS = 1.5
+# Self-crossings whose later segments are closer than this arc length (L_vb) count as
+# one loop event.
+_CROSSING_EVENT_ARC = 20.0
 _LONG_SEGMENT_CELLS = 64
 
 FloatArray = NDArray[np.float64]
@@ -159,13 +163,26 @@ class MeasureOptions:
             U-turn.
         periodic_cv_max: a serpentine is periodic when the CVs of amplitude and
             wavelength are both below this ...
-        periodic_min_cycles: ... over at least this many cycles.
+        periodic_min_cycles: ... over at least this many cycles (fewer cycles with
+            CVs below the bound: "too_short", periodicity cannot be confirmed).
+        serpentine_coil_loop_density: a serpentine is a serpentine-coil when it has
+            at least this many loops per cycle ...
+        serpentine_coil_min_loops: ... and at least this many loops in all (one
+            stray loop does not make a serpentine-coil).
+        min_judged_cycles: fewer cycles than this, and not a serpentine-coil:
+            "too_short" (neither periodicity nor irregularity can be judged).
+        min_judged_length: a measured trace shorter than this (L_vb) is "too_short".
         coil_max_rel_spread: a coil needs relative radius spread
             ``(p84 - p16) / (2 median)`` below this.
         coil_min_coverage: a coil needs its accepted windows to cover at least
             this fraction of the measured arc length.
         coil_min_turn_sign_fraction: a coil needs at least this fraction of its
             accepted windows to turn the same way (turning "about monotone").
+        coil_loose_rel_residual: for the class only, a window counts towards the
+            coil coverage when it is one turn of a circle (turning and length tests)
+            with an RMS residual up to this fraction of its radius: a coil whose centre
+            still drifts (a loose start-up coil) is a coil; its radius comes from the
+            strict windows only.
         rough_turning_angle: median turning angle per vertex (rad) above which the
             trace is too rough to be a rod trace (noise, random walk): "unknown".
         crossing_pair_budget: most candidate segment pairs examined for
@@ -179,9 +196,14 @@ class MeasureOptions:
     uturn_prominence: float = 3.0
     periodic_cv_max: float = 0.10
     periodic_min_cycles: int = 10
+    serpentine_coil_loop_density: float = 0.2
+    serpentine_coil_min_loops: int = 2
+    min_judged_cycles: int = 3
+    min_judged_length: float = 100.0
     coil_max_rel_spread: float = 0.10
     coil_min_coverage: float = 0.8
     coil_min_turn_sign_fraction: float = 0.9
+    coil_loose_rel_residual: float = 0.25
     rough_turning_angle: float = 0.25 * math.pi
     crossing_pair_budget: int = 2_000_000
 
@@ -192,9 +214,14 @@ class MeasureOptions:
         _check_float("uturn_prominence", self.uturn_prominence)
         _check_float("periodic_cv_max", self.periodic_cv_max)
         _check_int("periodic_min_cycles", self.periodic_min_cycles)
+        _check_float("serpentine_coil_loop_density", self.serpentine_coil_loop_density)
+        _check_int("serpentine_coil_min_loops", self.serpentine_coil_min_loops)
+        _check_int("min_judged_cycles", self.min_judged_cycles)
+        _check_float("min_judged_length", self.min_judged_length, allow_zero=True)
         _check_float("coil_max_rel_spread", self.coil_max_rel_spread)
         _check_float("coil_min_coverage", self.coil_min_coverage, upper=1.0)
         _check_float("coil_min_turn_sign_fraction", self.coil_min_turn_sign_fraction, upper=1.0)
+        _check_float("coil_loose_rel_residual", self.coil_loose_rel_residual)
         _check_float("rough_turning_angle", self.rough_turning_angle, upper=math.pi)
         _check_int("crossing_pair_budget", self.crossing_pair_budget)
 
@@ -427,6 +454,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         "radii": empty,
         "window_length": float(window),
         "coverage": 0.0,
+        "loose_coverage": 0.0,
         "turn_sign_fraction": math.nan,
     }
     if not math.isfinite(window) or window > total:
@@ -453,9 +481,8 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         _, _, radius[b0:b1], rms[b0:b1] = _fit_circles(p[idx, 0], p[idx, 1], mask)
     turning = heading[i1 - 1] - heading[i0]
     with np.errstate(invalid="ignore", divide="ignore"):
-        accepted = (
+        one_turn = (
             np.isfinite(radius)
-            & (rms <= options.coil_max_rel_residual * radius)
             # a window of one turn must turn by about 2 pi and be about one
             # circumference long; a big circle through a meander is neither
             & (np.abs(turning) >= math.pi * options.coil_window_turns)
@@ -464,6 +491,8 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
                 <= _TURN_LENGTH_TOLERANCE
             )
         )
+        accepted = one_turn & (rms <= options.coil_max_rel_residual * radius)
+        loose = one_turn & (rms <= options.coil_loose_rel_residual * radius)
     radii = radius[accepted]
     result["n_windows"] = n_win
     result["n_rejected"] = int(n_win - radii.size)
@@ -476,6 +505,10 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         result["coverage"] = min(1.0, covered / total)
         signs = np.sign(turning[accepted])
         result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+    if loose.any():
+        l_starts = starts[loose]
+        covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
+        result["loose_coverage"] = min(1.0, covered / total)
     return result
 
 
@@ -807,9 +840,17 @@ def _loops(m: _Measured, options: MeasureOptions, u: dict[str, Any]) -> dict[str
     per_interval = np.floor((np.abs(turning) + LOOP_TURNING_TOLERANCE) / (2.0 * math.pi))
     pairs, complete = _crossing_pairs(m.points, options.crossing_pair_budget)
     n_loops = int(per_interval.sum())
+    # crossing events: crossing pairs whose later segments (where a loop closes) lie
+    # within _CROSSING_EVENT_ARC of each other are one event (a loop may cross itself
+    # and its neighbouring legs a few times)
+    events = 0
+    if pairs.shape[0]:
+        closing = np.sort(m.s[pairs[:, 1]])
+        events = int(1 + np.count_nonzero(np.diff(closing) > _CROSSING_EVENT_ARC))
     return {
         "has_loops": bool(n_loops > 0 or pairs.shape[0] > 0),
         "n_loops": n_loops,
+        "n_loop_events": max(n_loops, events),
         "n_self_crossings": int(pairs.shape[0]),
         "self_crossings_complete": bool(complete),
         "interval_turning": turning,
@@ -852,30 +893,39 @@ def _pattern(
     substrate: str,
     rough: float,
     chord_ratio: float,
+    length: float,
     coil: dict[str, Any],
     serp: dict[str, Any],
     loops: dict[str, Any],
 ) -> str:
     if rough > options.rough_turning_angle:
         return "unknown"
+    if length < options.min_judged_length:
+        return "too_short"
     median = coil["median"]
     if math.isfinite(median):
         p16, p84 = coil["spread"]
         if (
             (p84 - p16) / (2.0 * median) < options.coil_max_rel_spread
-            and coil["coverage"] >= options.coil_min_coverage
+            and coil["loose_coverage"] >= options.coil_min_coverage
             and coil["turn_sign_fraction"] >= options.coil_min_turn_sign_fraction
         ):
             return "coil"
     if substrate == "stepped" and serp["n_uturns"] >= 2:
-        if loops["has_loops"]:
-            return "serpentine-coil"
-        if (
-            serp["n_cycles"] >= options.periodic_min_cycles
-            and serp["amplitude_cv"] < options.periodic_cv_max
-            and serp["wavelength_cv"] < options.periodic_cv_max
+        cycles = serp["n_cycles"]
+        events = loops["n_loop_events"]
+        if events >= options.serpentine_coil_min_loops and (
+            events >= options.serpentine_coil_loop_density * max(cycles, 1)
         ):
-            return "periodic-serpentine"
+            return "serpentine-coil"
+        if cycles < options.min_judged_cycles:
+            return "too_short"
+        regular = (
+            serp["amplitude_cv"] < options.periodic_cv_max
+            and serp["wavelength_cv"] < options.periodic_cv_max
+        )
+        if regular:
+            return "periodic-serpentine" if cycles >= options.periodic_min_cycles else "too_short"
         return "irregular-serpentine"
     if serp["n_uturns"] == 0 and not loops["has_loops"] and chord_ratio >= STRAIGHT_MIN_CHORD_RATIO:
         return "straight"
@@ -897,8 +947,12 @@ def measure(
     ``transient_length``, ``n_points``, ``coil_radius``, ``coil_radius_spread``,
     ``coil_n_windows``, ``coil_n_rejected``, ``coil_coverage``, ``amplitude``,
     ``amplitude_spread``, ``amplitude_cv``, ``wavelength``, ``wavelength_spread``,
-    ``wavelength_cv``, ``n_cycles``, ``n_uturns``, ``n_loops``,
-    ``n_self_crossings``, ``self_crossings_complete``, ``median_vertex_turning``.
+    ``wavelength_cv``, ``wavelength_progression`` (same-side U-turn spacing along
+    the trace's own direction of progression, ``progression_direction``; with the
+    paper's frame, wavelength along x, it differs when the flow is oblique),
+    ``n_cycles``, ``n_uturns``, ``n_loops``, ``n_loop_events``, ``loop_density``
+    (loop events per cycle), ``n_self_crossings``, ``self_crossings_complete``,
+    ``median_vertex_turning``.
     """
     options = _options(options)
     if substrate not in SUBSTRATES:
@@ -911,7 +965,9 @@ def measure(
     rough = _median_vertex_turning(m)
     length = float(m.s[-1])
     chord = float(np.hypot(*(m.points[-1] - m.points[0])))
-    pattern = _pattern(options, substrate, rough, chord / length, coil, serp, loops)
+    pattern = _pattern(options, substrate, rough, chord / length, length, coil, serp, loops)
+    prog = _serpentine(m, u, None)
+    cycles = max(int(serp["n_cycles"]), 1)
     return {
         "pattern": pattern,
         "substrate": substrate,
@@ -923,6 +979,7 @@ def measure(
         "coil_n_windows": int(coil["n_windows"]),
         "coil_n_rejected": int(coil["n_rejected"]),
         "coil_coverage": float(coil["coverage"]),
+        "coil_loose_coverage": float(coil["loose_coverage"]),
         "amplitude": float(serp["amplitude"]),
         "peak_to_peak": float(serp["peak_to_peak"]),
         "amplitude_spread": [float(v) for v in serp["amplitude_spread"]],
@@ -930,9 +987,13 @@ def measure(
         "wavelength": float(serp["wavelength"]),
         "wavelength_spread": [float(v) for v in serp["wavelength_spread"]],
         "wavelength_cv": float(serp["wavelength_cv"]),
+        "wavelength_progression": float(prog["wavelength"]),
+        "progression_direction": [float(v) for v in prog["direction"]],
         "n_cycles": int(serp["n_cycles"]),
         "n_uturns": int(serp["n_uturns"]),
         "n_loops": int(loops["n_loops"]),
+        "n_loop_events": int(loops["n_loop_events"]),
+        "loop_density": float(loops["n_loop_events"]) / cycles,
         "n_self_crossings": int(loops["n_self_crossings"]),
         "self_crossings_complete": bool(loops["self_crossings_complete"]),
         "median_vertex_turning": rough,
@@ -951,18 +1012,25 @@ def classify(
 
     1. ``"unknown"`` if the median turning angle per vertex exceeds
        ``rough_turning_angle``: too rough for a rod trace (noise, random walk).
-    2. ``"coil"``: accepted coil windows (:func:`coil_radius`) cover at least
-       ``coil_min_coverage`` of the measured arc length, their relative spread
+    2. ``"too_short"`` if the measured arc is shorter than ``min_judged_length``.
+    3. ``"coil"``: windows that are one turn of a circle with a residual up to
+       ``coil_loose_rel_residual`` (a loose, drifting coil counts) cover at least
+       ``coil_min_coverage`` of the measured arc length; the accepted windows
+       (:func:`coil_radius`) have a relative spread
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
        ``coil_min_turn_sign_fraction`` of them turn the same way.
-    3. On the ``"stepped"`` substrate, with at least two U-turns:
-       ``"serpentine-coil"`` if there are loops (:func:`has_loops`); else
-       ``"periodic-serpentine"`` if amplitude and wavelength CVs are both below
-       ``periodic_cv_max`` over at least ``periodic_min_cycles`` cycles; else
-       ``"irregular-serpentine"``.
-    4. ``"straight"``: no U-turns, no loops, chord / arc length >=
+    4. On the ``"stepped"`` substrate, with at least two U-turns:
+       ``"serpentine-coil"`` if it has at least ``serpentine_coil_min_loops`` loop
+       events and at least ``serpentine_coil_loop_density`` of them per cycle (a loop
+       event: a full turn of the tangent between U-turns, or a cluster of
+       self-crossings; one stray loop is not a serpentine-coil); else ``"too_short"``
+       below ``min_judged_cycles`` cycles; else ``"periodic-serpentine"`` if the CVs
+       of amplitude and wavelength are both below ``periodic_cv_max`` over at least
+       ``periodic_min_cycles`` cycles (``"too_short"`` with fewer: regular, but not
+       long enough to call periodic); else ``"irregular-serpentine"``.
+    5. ``"straight"``: no U-turns, no loops, chord / arc length >=
        ``STRAIGHT_MIN_CHORD_RATIO``.
-    5. ``"unknown"`` otherwise. On the ``"flat"`` substrate the serpentine classes
+    6. ``"unknown"`` otherwise. On the ``"flat"`` substrate the serpentine classes
        are never returned (they are defined relative to the steps along z), so
        the answer is coil, straight or unknown.
     """

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -267,10 +268,10 @@ def test_irregular_serpentine() -> None:
     serp = serpentine_measures(trace)
     assert serp["amplitude_cv"] > 0.1
     assert classify(trace, substrate="stepped") == "irregular-serpentine"
-    # too few cycles for "periodic"
+    # regular but too few cycles to call periodic: too short to judge (issue 12)
     short = serpentine_trace(n_runs=20)
     assert serpentine_measures(short)["n_cycles"] < 10
-    assert classify(short, substrate="stepped") == "irregular-serpentine"
+    assert classify(short, substrate="stepped") == "too_short"
     assert classify(short, MeasureOptions(periodic_min_cycles=5), "stepped") == (
         "periodic-serpentine"
     )
@@ -287,6 +288,65 @@ def test_serpentine_with_loops() -> None:
     serp = serpentine_measures(trace)
     assert serp["amplitude"] == pytest.approx(A_BAR, rel=SERPENTINE_REL)
     assert serp["wavelength"] == pytest.approx(LAMBDA_BAR, rel=SERPENTINE_REL)
+
+
+def test_one_loop_does_not_make_a_serpentine_coil() -> None:
+    """Issue 12: one loop in a long periodic serpentine is a stray event; the class
+    follows the loop density (loop events per cycle)."""
+    runs = [2 * A_BAR - LAMBDA_BAR / 2] * 44
+    one = serpentine_curve(runs, LAMBDA_BAR, 0.5, loop_every=11)  # 2 loops in 21 cycles
+    one = one + 0.01 * np.random.default_rng(1).standard_normal(one.shape)
+    result = measure(one, substrate="stepped")
+    assert result["n_loop_events"] == 2
+    assert result["loop_density"] < 0.2
+    assert result["pattern"] == "periodic-serpentine"
+    # the same loops kept in a trace one third as long are dense enough
+    dense = measure(serpentine_trace(loop_every=3), substrate="stepped")
+    assert dense["loop_density"] >= 0.2
+    assert dense["pattern"] == "serpentine-coil"
+
+
+@pytest.mark.parametrize("noise", [0.05, 0.15])
+def test_classes_survive_noise(noise: float) -> None:
+    """Point noise (a fraction of the leg spacing, at the simulator's delta = 1) changes
+    no class."""
+    tight = serpentine_trace(run=60.0, wavelength=4.0, spacing=1.0, noise=noise, seed=4)
+    assert measure(tight, substrate="stepped")["pattern"] == "periodic-serpentine"  # legs 2 apart
+    looped = serpentine_trace(loop_every=3, spacing=1.0, noise=noise, seed=5)
+    assert measure(looped, substrate="stepped")["pattern"] == "serpentine-coil"
+    rng = np.random.default_rng(6)
+    # consecutive up and down runs share their length, so the curve has no jumps
+    runs = list(np.repeat(2 * A_BAR - LAMBDA_BAR / 2 + 8.0 * rng.standard_normal(22), 2))
+    irregular = serpentine_curve(runs, LAMBDA_BAR, 1.0)
+    irregular = irregular + noise * rng.standard_normal(irregular.shape)
+    assert measure(irregular, substrate="stepped")["pattern"] == "irregular-serpentine"
+    assert classify(coil_trace(3000.0, spacing=1.0, noise=noise, seed=7)) == "coil"
+
+
+def test_too_short_to_judge() -> None:
+    """A trace too short to judge is reported as such, not as a pattern."""
+    few = serpentine_trace(n_runs=5)  # two cycles
+    no_transient = MeasureOptions(transient_length=0.0)
+    assert measure(few, no_transient, substrate="stepped")["pattern"] == "too_short"
+    stub = np.stack([np.arange(0.0, 250.0, 0.5), np.zeros(500)], axis=1)  # 50 after transient
+    assert measure(stub)["pattern"] == "too_short"
+    assert measure(stub, MeasureOptions(min_judged_length=10.0))["pattern"] == "straight"
+
+
+def test_wavelength_along_x_and_along_progression() -> None:
+    """Paper's frame: wavelength along x; the progression wavelength is a second
+    measure. A serpentine sheared along z (oblique flow) has them differ."""
+    trace = serpentine_trace(noise=0.0)
+    shear = 0.8  # z += shear * x: progression at atan(0.8) from x
+    skew = trace.copy()
+    skew[:, 1] += shear * skew[:, 0]
+    result = measure(skew, substrate="stepped")
+    assert result["wavelength"] == pytest.approx(LAMBDA_BAR, rel=SERPENTINE_REL)
+    assert result["wavelength_progression"] == pytest.approx(
+        LAMBDA_BAR * math.hypot(1.0, shear), rel=SERPENTINE_REL
+    )
+    straight = measure(trace, substrate="stepped")
+    assert straight["wavelength_progression"] == pytest.approx(LAMBDA_BAR, rel=SERPENTINE_REL)
 
 
 def test_wide_loops_are_caught_by_crossings() -> None:
@@ -453,6 +513,11 @@ def test_trace_too_short_after_transient() -> None:
         {"periodic_min_cycles": 2.5},
         {"coil_min_coverage": 1.5},
         {"crossing_pair_budget": True},
+        {"serpentine_coil_loop_density": -0.1},
+        {"serpentine_coil_min_loops": 0},
+        {"min_judged_cycles": 1.5},
+        {"min_judged_length": math.nan},
+        {"coil_loose_rel_residual": 0.0},
     ],
 )
 def test_invalid_options(kwargs: dict[str, object]) -> None:
@@ -470,3 +535,39 @@ def test_invalid_arguments() -> None:
             serpentine_measures(trace, flow_direction=bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="options"):
         measure(trace, options={"transient_length": 0.0})  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- real traces
+
+REAL = Path(__file__).parent / "data" / "real_traces.npz"
+
+
+@pytest.mark.parametrize(
+    ("name", "pattern"),
+    [
+        ("serpentine_vbar_0p01", "serpentine-coil"),  # loops at most U-turns
+        ("serpentine_vbar_0p037", "periodic-serpentine"),
+        ("serpentine_vbar_0p13", "periodic-serpentine"),
+    ],
+)
+def test_real_sweep_traces(name: str, pattern: str) -> None:
+    """Traces of the simulator's vbar sweep (benchmarks/results/sweep_vbar, linear drag,
+    sliding B; stored as float32 (x, z)), measured as the sweep measures them."""
+    trace = np.load(REAL)[name].astype(np.float64)
+    result = measure(trace, MeasureOptions(transient_length=150.0), substrate="stepped")
+    assert result["pattern"] == pattern
+
+
+def test_real_coil_with_a_drifting_start_is_a_coil() -> None:
+    """A simulated coil (printed drag, delta = 1, 800 L_vb, 240 dropped) whose centre
+    still drifts over its first ~200 L_vb (circle-fit residuals 5-20% of the radius):
+    it is a coil, and its radius comes from the clean windows only (issue 12)."""
+    trace = np.load(REAL)["coil_delta1_printed"].astype(np.float64)
+    result = measure(trace, MeasureOptions(transient_length=240.0))
+    assert result["coil_coverage"] < 0.8  # the strict windows alone would not call it
+    assert result["coil_loose_coverage"] >= 0.8
+    assert result["pattern"] == "coil"
+    assert result["coil_radius"] == pytest.approx(7.90, abs=0.03)
+    # a serpentine's windows are not one turn of a circle, however loose
+    serp = measure(serpentine_trace(), substrate="stepped")
+    assert serp["coil_loose_coverage"] < 0.2

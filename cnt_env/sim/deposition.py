@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from cnt_env.presets import MODEL
 from cnt_env.sim.forces import (
     VDW_BETA0,
     VDW_CLAMP,
@@ -32,7 +33,14 @@ from cnt_env.sim.forces import (
     vdw_pull,
 )
 from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
-from cnt_env.sim.substrate import FlatSticky, Stepped, Substrate
+from cnt_env.sim.substrate import (
+    SLIDING_OPTIONS,
+    SNAP_OPTIONS,
+    TAIL_CLAMP_OPTIONS,
+    FlatSticky,
+    Stepped,
+    Substrate,
+)
 from cnt_env.units import DimensionlessParams
 
 CONTACT_MODES = ("project", "event")
@@ -71,10 +79,12 @@ class ContactOptions:
 class DepositionConfig:
     """Everything that defines a deposition run, in dimensionless units.
 
-    ``drag_law`` is ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and
-    sticky when ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B" or
-    "C") and ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
-    serpentine preset) apply to the stepped one (substrate.py).
+    The model defaults come from ``presets.MODEL`` (issue 12's choice). ``drag_law`` is
+    ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and sticky when
+    ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B", "C" or "none"),
+    ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
+    serpentine preset), ``friction``, ``snap``, ``snap_stiffness`` and ``tail_clamp``
+    apply to the stepped one (substrate.Stepped documents each).
 
     Graded discretisation [choice, docs/model.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
@@ -94,9 +104,13 @@ class DepositionConfig:
     perturbation: float = 1e-3
     coarse_delta: float | None = None
     fine_length: float = 20.0
-    drag_law: str = "linear"
-    sliding: str = "B"
-    tail_length: float = 195.0
+    drag_law: str = MODEL["drag_law"]
+    sliding: str = MODEL["sliding"]
+    tail_length: float = MODEL["tail_length"]
+    friction: float = MODEL["friction"]
+    snap: str = MODEL["snap"]
+    snap_stiffness: float = 1.0e4
+    tail_clamp: str = MODEL["tail_clamp"]
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
 
@@ -113,8 +127,18 @@ class DepositionConfig:
             )
         if self.initial_radius >= p.Hbar:
             raise ValueError("initial_radius must be below Hbar")
-        if self.sliding not in ("B", "C"):
-            raise ValueError(f"sliding must be 'B' or 'C', got {self.sliding!r}")
+        if self.sliding not in SLIDING_OPTIONS:
+            raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"friction must be finite and >= 0, got {self.friction!r}")
+        if self.snap not in SNAP_OPTIONS:
+            raise ValueError(f"snap must be one of {SNAP_OPTIONS}, got {self.snap!r}")
+        if not (math.isfinite(self.snap_stiffness) and self.snap_stiffness > 0):
+            raise ValueError(f"snap_stiffness must be finite and > 0, got {self.snap_stiffness!r}")
+        if self.tail_clamp not in TAIL_CLAMP_OPTIONS:
+            raise ValueError(
+                f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {self.tail_clamp!r}"
+            )
         if not (self.tail_length > 4 * p.delta_bar):
             raise ValueError(f"tail_length must exceed 4 delta_bar, got {self.tail_length!r}")
         if self.coarse_delta is not None and not (
@@ -155,7 +179,13 @@ class DepositionSim:
             FlatSticky()
             if p.kappa_c_bar is None
             else Stepped(
-                kappa_c=p.kappa_c_bar, sliding=config.sliding, tail_length=config.tail_length
+                kappa_c=p.kappa_c_bar,
+                sliding=config.sliding,
+                tail_length=config.tail_length,
+                friction=config.friction,
+                snap=config.snap,
+                snap_stiffness=config.snap_stiffness,
+                tail_clamp=config.tail_clamp,
             )
         )
         self.delta = p.delta_bar
@@ -193,7 +223,7 @@ class DepositionSim:
         self.immediate_deposits = 0
         for i in range(n_dep):
             self._deposit(i)
-        self.rod.fix_node(0)  # the oldest node on the substrate is the clamp (any substrate)
+        self._clamp_oldest()  # the oldest node on the substrate is the clamp (any substrate)
         self.beta0 = 0.0  # not armed yet
         self._settle_contact()
 
@@ -300,9 +330,17 @@ class DepositionSim:
         keep = len(self.snapped) - extra
         self.snapped[:keep] = self.snapped[extra:].copy()
         self.snapped[keep:] = False
-        rod.fixed[0:3] = 1  # the oldest retained node stays clamped
-        rod.u[0:3] = 0.0
+        self._clamp_oldest()
         rod.vdw[VDW_NODE] = self.contact_node
+
+    def _clamp_oldest(self) -> None:
+        """Clamp the oldest retained node: x, y and z, or x and y only when the stepped
+        substrate's ``tail_clamp`` is "xy" (the steps do not vary along z, so a clamp in z
+        would pin the sliding trace to the lab frame)."""
+        rod = self.rod
+        k = 2 if getattr(self.substrate, "tail_clamp", "xyz") == "xy" else 3
+        rod.fixed[0:k] = 1
+        rod.u[0:k] = 0.0
 
     def _archive(self, points: np.ndarray) -> None:
         n = self._n_archived

@@ -121,6 +121,39 @@ def add_linear_drag(
                 ab[_DIAG + k - m, b + m] -= dfb
 
 
+@njit(cache=True)
+def add_substrate(
+    q: np.ndarray,
+    q_old: np.ndarray,
+    dt: float,
+    n_dof: int,
+    friction: np.ndarray,
+    stiffness: np.ndarray,
+    anchor: np.ndarray,
+    force: np.ndarray,
+    ab: np.ndarray,
+    jacobian: bool,
+) -> None:
+    """Per-DOF substrate terms on deposited nodes (physics.md §5, [choice]; substrate.py):
+
+    * friction: F_k = -friction_k (q_k - q_old_k) / dt, a viscous resistance to sliding
+      (friction_k = eta * Voronoi length, eta per unit length in units of mu);
+    * penalty: F_k = -stiffness_k (q_k - anchor_k), a stiff spring that enforces a snap
+      inside the implicit solve instead of a position jump.
+
+    Both are diagonal: the residual Jacobian gets friction_k / dt + stiffness_k on DOF k.
+    Zero coefficients add exactly nothing; ``jacobian`` False leaves ``ab`` untouched.
+    """
+    for k in range(n_dof):
+        c = friction[k]
+        s = stiffness[k]
+        if c == 0.0 and s == 0.0:
+            continue
+        force[k] -= c * (q[k] - q_old[k]) / dt + s * (q[k] - anchor[k])
+        if jacobian:
+            ab[_DIAG, k] += c / dt + s
+
+
 # layout of the vdW parameter vector the stepper carries (Rod.vdw)
 VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY = range(5)
 

@@ -21,6 +21,9 @@ buffer                  shape               lives on
 ``mass``                (4 max_nodes,)      DOFs: lumped node mass, theta inertia
 ``fixed``               (4 max_nodes,)      DOFs: 1 = prescribed (not solved for)
 ``ext_force``           (4 max_nodes,)      DOFs: constant external load
+``sub_friction``        (4 max_nodes,)      DOFs: substrate friction coefficient
+``sub_stiffness``,      (4 max_nodes,)      DOFs: substrate penalty spring to
+``sub_anchor``                              ``sub_anchor`` (forces.add_substrate)
 ``rest_lengths``        (max_nodes - 1,)    edges
 ``drag_on``             (max_nodes - 1,)    edges: 1 = drag acts
 ``tangents_old``, ...   (max_nodes - 1, 3)  edges: frame frozen at step start
@@ -58,6 +61,7 @@ from cnt_env.sim.forces import (
     VDW_NODE,
     add_linear_drag,
     add_printed_drag,
+    add_substrate,
     add_vdw,
     vdw_pull,
 )
@@ -207,6 +211,9 @@ def assemble(
     c_sigma: float,
     drag_law: int,
     vdw: np.ndarray,
+    sub_friction: np.ndarray,
+    sub_stiffness: np.ndarray,
+    sub_anchor: np.ndarray,
     force: np.ndarray,
     ab: np.ndarray,
     rhs: np.ndarray,
@@ -229,6 +236,7 @@ def assemble(
             q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
         )
     add_vdw(q, vdw, force, ab)
+    add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
     res = 0.0
     for k in range(n_dof):
         if fixed[k]:
@@ -268,6 +276,9 @@ def residual(
     c_sigma: float,
     drag_law: int,
     vdw: np.ndarray,
+    sub_friction: np.ndarray,
+    sub_stiffness: np.ndarray,
+    sub_anchor: np.ndarray,
     force: np.ndarray,
     ab: np.ndarray,
     rhs: np.ndarray,
@@ -293,6 +304,7 @@ def residual(
         kc = 4 * node + 1
         f, _ = vdw_pull(q[kc], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
         force[kc] += f
+    add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, False)
     res = 0.0
     for k in range(n_dof):
         if fixed[k]:
@@ -330,6 +342,9 @@ def newton_solve(
     c_sigma: float,
     drag_law: int,
     vdw: np.ndarray,
+    sub_friction: np.ndarray,
+    sub_stiffness: np.ndarray,
+    sub_anchor: np.ndarray,
     tol_abs: float,
     update_abs: float,
     max_iter: int,
@@ -380,7 +395,8 @@ def newton_solve(
         if check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs:
             res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                            voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                           flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+                           flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
+                           sub_anchor, force, ab, rhs)  # fmt: skip
             n_resid += 1
             if not math.isfinite(res):
                 status = NON_FINITE
@@ -390,7 +406,8 @@ def newton_solve(
                 break
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                       flow, mu, sigma, c_sigma, drag_law, vdw, force, ab, rhs)  # fmt: skip
+                       flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
+                           sub_anchor, force, ab, rhs)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
@@ -448,6 +465,9 @@ def implicit_step(
     c_sigma: float,
     drag_law: int,
     vdw: np.ndarray,
+    sub_friction: np.ndarray,
+    sub_stiffness: np.ndarray,
+    sub_anchor: np.ndarray,
     tol_abs: float,
     update_tol: float,
     max_iter: int,
@@ -485,7 +505,8 @@ def implicit_step(
     status = newton_solve(
         q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s, k_b,
         k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
-        c_sigma, drag_law, vdw, tol_abs, update_tol * min_rest, max_iter, tangents, lengths,
+        c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
+        update_tol * min_rest, max_iter, tangents, lengths,
         d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, check,
     )  # fmt: skip
     if status != CONVERGED:
@@ -573,7 +594,7 @@ class Rod:
 
     # per-DOF, per-edge and per-node buffers, and the Newton workspace (name: (shape, dtype))
     _DOF_BUFFERS = ("q", "u", "mass", "fixed", "ext_force", "_q_old", "_u_old", "_force",
-                    "_rhs", "_ipiv")  # fmt: skip
+                    "_rhs", "_ipiv", "sub_friction", "sub_stiffness", "sub_anchor")  # fmt: skip
     _EDGE_BUFFERS = ("rest_lengths", "drag_on", "tangents_old", "d1_old", "_tangents",
                      "_lengths", "_d1", "_d2", "_m1", "_m2")  # fmt: skip
     _NODE_BUFFERS = ("voronoi_lengths", "ref_twist_old", "_kb", "_kappa", "_twist",
@@ -590,6 +611,8 @@ class Rod:
             "_q_old": np.zeros(n_dof_cap), "_u_old": np.zeros(n_dof_cap),
             "_force": np.zeros(n_dof_cap), "_rhs": np.zeros(n_dof_cap),
             "_ipiv": np.zeros(n_dof_cap, dtype=np.int64),
+            "sub_friction": np.zeros(n_dof_cap), "sub_stiffness": np.zeros(n_dof_cap),
+            "sub_anchor": np.zeros(n_dof_cap),
             "rest_lengths": np.zeros(cap - 1), "drag_on": np.ones(cap - 1, dtype=np.uint8),
             "tangents_old": np.zeros((cap - 1, 3)), "d1_old": np.zeros((cap - 1, 3)),
             "_tangents": np.zeros((cap - 1, 3)), "_lengths": np.zeros(cap - 1),
@@ -627,6 +650,8 @@ class Rod:
         self.u[i - 1] = self.u[i - 5]
         self.fixed[i - 1 : i + 3] = 0
         self.ext_force[i - 1 : i + 3] = 0.0
+        self.sub_friction[i - 1 : i + 3] = 0.0
+        self.sub_stiffness[i - 1 : i + 3] = 0.0
         e = np.asarray(position, dtype=np.float64) - self.q[i - 4 : i - 1]
         t_new = e / np.linalg.norm(e)
         frames.parallel_transport(self.d1_old[j - 1], self.tangents_old[j - 1], t_new,
@@ -682,6 +707,8 @@ class Rod:
             self.u[b + 3] = omega
             self.fixed[b : b + 4] = 0
             self.ext_force[b : b + 4] = 0.0
+            self.sub_friction[b : b + 4] = 0.0
+            self.sub_stiffness[b : b + 4] = 0.0
             self.ref_twist_old[j + 1 + m] = 0.0
         self.rest_lengths[j : j + n_sub] = self.rest_lengths[j] / n_sub
         self.n_nodes = n + k
@@ -809,6 +836,7 @@ class Rod:
             self.mass, self.fixed, self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b,
             m.k_t, self.tangents_old, self.d1_old, self.ref_twist_old, self.ext_force,
             self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
+            self.sub_friction, self.sub_stiffness, self.sub_anchor,
             o.residual_tol * o.force_scale, o.update_tol, o.max_iter,
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
@@ -844,6 +872,8 @@ class Rod:
         return {
             "n_nodes": self.n_nodes, "q": self.q.copy(), "u": self.u.copy(),
             "fixed": self.fixed.copy(), "ext_force": self.ext_force.copy(),
+            "sub_friction": self.sub_friction.copy(),
+            "sub_stiffness": self.sub_stiffness.copy(), "sub_anchor": self.sub_anchor.copy(),
             "rest_lengths": self.rest_lengths.copy(), "drag_on": self.drag_on.copy(),
             "flow": self.flow.copy(), "tangents_old": self.tangents_old.copy(),
             "d1_old": self.d1_old.copy(), "ref_twist_old": self.ref_twist_old.copy(),
@@ -858,6 +888,8 @@ class Rod:
         cap = (len(snap["q"])) // 4
         if cap != self.max_nodes:
             self._allocate(cap)
+        for key in ("sub_friction", "sub_stiffness", "sub_anchor"):
+            getattr(self, key)[...] = 0.0  # snapshots from before these existed: none
         for key, value in snap.items():
             if isinstance(value, np.ndarray):
                 getattr(self, key)[...] = value

@@ -15,7 +15,16 @@ import numpy as np
 
 from cnt_env.sim.stepper import Rod
 
-SLIDING_OPTIONS = ("B", "C")
+SLIDING_OPTIONS = ("B", "C", "none")
+#: How a snap (critical-curvature rule) is applied [choice]: "jump" moves the edge's newer
+#: node onto the step line (x and z, keeping the edge length) between steps; "constraint"
+#: prescribes only its x (fixed at the snapped value) and lets the next implicit solve
+#: restore the length; "penalty" adds a stiff spring in x to the snapped line inside the
+#: solve (forces.add_substrate), so nothing jumps.
+SNAP_OPTIONS = ("jump", "constraint", "penalty")
+#: DOFs of the oldest retained deposited node that are clamped: "xyz", or "xy" (z slides
+#: like every other deposited node: the steps do not vary along z).
+TAIL_CLAMP_OPTIONS = ("xyz", "xy")
 
 
 @dataclass(frozen=True)
@@ -55,10 +64,18 @@ class Stepped:
 
     * ``"B"``: deposited nodes are fixed in x from touchdown and free in z;
     * ``"C"``: deposited nodes are free in x and z until their edge snaps, then fixed
-      in x.
+      in x;
+    * ``"none"``: deposited nodes are fixed in x and z (no sliding; a snap still turns
+      the edge).
 
     Deposited nodes stay in the solve (they slide, and drag acts on them) up to
     ``tail_length`` of arc behind the contact; the oldest retained node is clamped.
+
+    ``friction`` (eta >= 0, per unit length, in units of the drag coefficient mu) adds a
+    viscous resistance -eta l_i u to every sliding DOF of a deposited node (z, and x while
+    it is free under "C"), l_i its Voronoi length; 0 leaves only the gas drag. ``snap``
+    is one of SNAP_OPTIONS; ``snap_stiffness`` (e_v / L_vb^2 per unit length) is the
+    penalty spring's stiffness.
     """
 
     kappa_c: float
@@ -67,6 +84,10 @@ class Stepped:
     # it would fold the trace into a hairpin (a pi turn, where the curvature is singular)
     max_snap_turn: float = math.radians(150.0)
     tail_length: float = 195.0
+    friction: float = 0.0
+    snap: str = "jump"
+    snap_stiffness: float = 1.0e4
+    tail_clamp: str = "xyz"
     name: str = "stepped"
     keep_deposited: int = 0  # not used: the tail is kept by arc length
 
@@ -77,15 +98,32 @@ class Stepped:
             raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
         if not (self.tail_length > 0):
             raise ValueError(f"tail_length must be > 0, got {self.tail_length!r}")
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"friction must be finite and >= 0, got {self.friction!r}")
+        if self.snap not in SNAP_OPTIONS:
+            raise ValueError(f"snap must be one of {SNAP_OPTIONS}, got {self.snap!r}")
+        if not (math.isfinite(self.snap_stiffness) and self.snap_stiffness > 0):
+            raise ValueError(f"snap_stiffness must be finite and > 0, got {self.snap_stiffness!r}")
+        if self.tail_clamp not in TAIL_CLAMP_OPTIONS:
+            raise ValueError(
+                f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {self.tail_clamp!r}"
+            )
 
     def deposit(self, rod: Rod, node: int) -> None:
         i = 4 * node
         rod.q[i + 1] = 0.0
         rod.u[i + 1] = 0.0
         rod.fixed[i + 1] = 1
-        if self.sliding == "B":
+        if self.sliding in ("B", "none"):
             rod.u[i] = 0.0
             rod.fixed[i] = 1
+        if self.sliding == "none":
+            rod.u[i + 2] = 0.0
+            rod.fixed[i + 2] = 1
+        if self.friction > 0.0:
+            eta = self.friction * rod.voronoi_lengths[node]
+            rod.sub_friction[i] = eta  # only acts while x is free (fixed rows are identity)
+            rod.sub_friction[i + 2] = eta
 
     def after_step(self, rod: Rod, n_deposited: int, snapped: np.ndarray) -> int:
         """Apply the critical-curvature rule to every deposited edge not yet snapped."""
@@ -100,16 +138,36 @@ class Stepped:
             if abs(ex) < self.kappa_c * rod.rest_lengths[j] * abs(ez):
                 if self._would_fold(q, j, math.copysign(1.0, ez), rod.n_nodes):
                     continue
-                length = math.hypot(ex, ez)
-                q[b] = q[a]
-                q[b + 2] = q[a + 2] + math.copysign(length, ez)
-                rod.u[b] = 0.0
-                for node in (j, j + 1):  # aligned with the steps: x is locked
-                    rod.fixed[4 * node] = 1
-                    rod.u[4 * node] = 0.0
+                self._snap(rod, j, ex, ez)
                 snapped[j] = True
                 count += 1
         return count
+
+    def _snap(self, rod: Rod, j: int, ex: float, ez: float) -> None:
+        """Turn edge j (nodes j, j+1) along z by moving its newer node (see SNAP_OPTIONS)."""
+        q = rod.q
+        a, b = 4 * j, 4 * (j + 1)
+        if self.snap == "penalty":
+            # the line x = x*: node a's prescribed (or anchored) x, else its current x
+            x_star = q[a]
+            if not rod.fixed[a] and rod.sub_stiffness[a] > 0.0:
+                x_star = rod.sub_anchor[a]
+            k = self.snap_stiffness * rod.voronoi_lengths[j + 1]
+            for i in (a, b):
+                if rod.fixed[i] and i == a:
+                    continue
+                rod.fixed[i] = 0
+                rod.sub_stiffness[i] = k
+                rod.sub_anchor[i] = x_star
+            return
+        if self.snap == "jump":
+            length = math.hypot(ex, ez)
+            q[b + 2] = q[a + 2] + math.copysign(length, ez)
+        q[b] = q[a]
+        rod.u[b] = 0.0
+        for node in (j, j + 1):  # aligned with the steps: x is locked
+            rod.fixed[4 * node] = 1
+            rod.u[4 * node] = 0.0
 
     def _would_fold(self, q: np.ndarray, j: int, sz: float, n_nodes: int) -> bool:
         """Does edge j, turned to (0, 0, sz), make a turn > max_snap_turn with a neighbour?"""

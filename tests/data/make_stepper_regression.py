@@ -12,8 +12,9 @@ Two kinds of case:
   a changing flow, a vdW contact node, fixed DOFs, append_node, split_edge, drop_front,
   step halvings. Independent of the deposition model's configuration.
 * ``dep_*``: small DepositionSim runs (Hbar = 30, explicit DepositionConfig), coil
-  (flat sticky) and serpentine (stepped); they depend on deposition.py / substrate.py
-  too and must be regenerated if the model configuration changes.
+  (flat sticky) and serpentine (stepped) in the configuration of 9eb2b55 (linear drag,
+  sliding B), passed explicitly; they depend on deposition.py / substrate.py too and
+  must be regenerated if those change what that configuration computes.
 """
 
 from __future__ import annotations
@@ -57,7 +58,11 @@ def rod_case(newton=None) -> dict:
 
 
 def dep_case(name: str, preset: str, length: float, newton=None) -> dict:
-    extra = {} if newton is None else {"newton": newton}
+    # the model configuration of 9eb2b55, explicit, so that later changes of the
+    # defaults (presets.MODEL, issue 12) do not invalidate the reference
+    extra = {"drag_law": "linear", "sliding": "B"}
+    if newton is not None:
+        extra["newton"] = newton
     if preset == "coil":
         params = paper_groups("coil", Hbar=30.0, Ibar=200.0)
         cfg = DepositionConfig(params=params, initial_radius=4.0, **extra)

@@ -1,0 +1,667 @@
+"""Reproduce the paper's sweeps (issue 12): coils, the (kappa_c, vbar) phase diagram with
+Abar(vbar) and lambda(vbar), Abar/lambda against Hbar, Ibar and phi, and the model
+configuration study.
+
+    python benchmarks/reproduce.py [--jobs 2] [--quick] [--only ROW] [--candidate NAME]
+                                   [--out DIR] [--dt-factor F] [--max-wall S]
+
+Resumable: every finished point is one JSON line in ``DIR/results.jsonl``; points already
+there (same key) are skipped. Parallel over a ProcessPoolExecutor (spawn context). At the
+end it writes ``DIR/summary.md`` (model against paper wherever the paper gives a number)
+and figures ``DIR/*.png``. ``--candidate`` runs the rows with one of the named model
+configurations of CANDIDATES (the configuration study); the default is the configuration
+``default_config`` carries (presets.py). Uses the library directly (no CLI).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+#: Named model configurations of the study (DepositionConfig fields). "default" is
+#: whatever presets.py / DepositionConfig carry; the others name what they change.
+CANDIDATES: dict[str, dict[str, Any]] = {
+    "default": {},
+    # issue 12's starting point: linear drag, x fixed (B), jump snap, z clamped tail
+    "today": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    # the paper as printed: eq. 2 drag, delta ~ L_vb, deposited on penetrating y = 0
+    "printed": {
+        "drag_law": "printed",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+        "contact_mode": "project",
+    },
+    "C": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "C_penalty": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "penalty",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "C_tail60": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+        "tail_length": 60.0,
+    },
+    "printed_C": {
+        "drag_law": "printed",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    # sliding along z without a z clamp: the trace may translate along the steps
+    "B_free": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xy",
+    },
+    "B_free_printed": {
+        "drag_law": "printed",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xy",
+    },
+    "C_free": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xy",
+    },
+    "B_penalty": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "penalty",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "B_constraint": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "constraint",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+    "B_friction10": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 10.0,
+        "tail_clamp": "xy",
+    },
+    "B_friction1": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 1.0,
+        "tail_clamp": "xy",
+    },
+    "none": {
+        "drag_law": "linear",
+        "sliding": "none",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+    },
+}
+
+SERP = "serpentine"
+COIL = "coil"
+
+
+def _pt(row: str, preset: str, **groups: Any) -> dict[str, Any]:
+    return {"row": row, "preset": preset, "groups": groups}
+
+
+def rows(quick: bool = False) -> dict[str, list[dict[str, Any]]]:
+    """The points of each row (dimensionless groups changed from the preset)."""
+    if quick:
+        return {
+            "coil": [_pt("coil", COIL)],
+            "vbar": [_pt("vbar", SERP, vbar=v) for v in (0.037, 0.12)],
+            "phi": [_pt("phi", SERP, phi=1.2)],
+        }
+    # in priority order: a run cut short by --max-wall has the paper's headline rows
+    out: dict[str, list[dict[str, Any]]] = {}
+    out["coil"] = [_pt("coil", COIL)]
+    out["vbar"] = [_pt("vbar", SERP, vbar=v) for v in (0.037, 0.019, 0.07, 0.12, 0.005, 0.05, 0.1)]
+    out["phi"] = [_pt("phi", SERP, phi=f) for f in (1.2, 0.87, 1.45, 0.44)]
+    out["phase"] = [
+        _pt("phase", SERP, kappa_c_bar=k, vbar=v)
+        for k in (0.1, 0.15)
+        for v in (0.037, 0.019, 0.07, 0.12)
+    ]
+    out["Hbar"] = [_pt("Hbar", SERP, Hbar=h) for h in (100.0, 250.0)]
+    out["Ibar"] = [_pt("Ibar", SERP, Ibar=i) for i in (100.0, 1000.0)]
+    out["coil_groups"] = [_pt("coil_groups", COIL, Hbar=h) for h in (150.0, 400.0)] + [
+        _pt("coil_groups", COIL, Ibar=i) for i in (700.0, 7000.0)
+    ]
+    return out
+
+
+#: the study's screening rows (issue 12: v row, phi row, kappa_c row), most telling first
+STUDY_POINTS = (
+    [_pt("vbar", SERP, vbar=v) for v in (0.019, 0.12)]
+    + [_pt("phi", SERP, phi=1.2), _pt("vbar", SERP, vbar=0.037)]
+    + [_pt("vbar", SERP, vbar=0.07), _pt("phi", SERP, phi=0.87), _pt("phi", SERP, phi=0.44)]
+    + [_pt("phase", SERP, kappa_c_bar=k, vbar=0.037) for k in (0.1, 0.15)]
+)
+#: the discretisation finding: the baseline at finer delta (uniform 0.5; graded 0.125 near
+#: the contact as on the coil preset, 1 above)
+DELTA_POINTS = [
+    _pt("delta", SERP, delta_bar=0.5),
+    _pt("delta", SERP, delta_bar=0.125, coarse_delta=1.0),
+]
+
+#: What the paper gives (physics.md §6): (row, key) -> (quantity, value, note)
+PAPER: list[tuple[str, dict[str, float], str, float, str]] = [
+    ("coil", {}, "coil_radius", 7.64, "R0 = 7.64 (+-0.01)"),
+    ("vbar", {"vbar": 0.037}, "amplitude", 30.0, "baseline A ~ 30 (26-33)"),
+    ("vbar", {"vbar": 0.037}, "wavelength_x", 7.0, "baseline lambda ~ 6-8"),
+    ("vbar", {"vbar": 0.005}, "amplitude", 100.0, "A ~ 100 as vbar -> 0 (Fig. 4b)"),
+    ("vbar", {"vbar": 0.005}, "wavelength_x", 4.0, "lambda ~ 4 as vbar -> 0 (Fig. 4c)"),
+    ("vbar", {"vbar": 0.07}, "amplitude", 25.0, "A ~ 25 at vbar ~ 0.07 (Fig. 4b)"),
+    ("vbar", {"vbar": 0.12}, "wavelength_x", 25.0, "lambda ~ 25 at vbar ~ 0.13 (Fig. 4c)"),
+    ("phi", {"phi": 0.0}, "amplitude", 32.0, "phi = 0: A = 32 (Fig. 6b)"),
+    ("phi", {"phi": 0.0}, "wavelength_x", 6.0, "phi = 0: lambda = 6.0 (Fig. 6b)"),
+    ("phi", {"phi": 1.45}, "amplitude", 90.0, "phi -> pi/2: A -> 90 (Fig. 6b, at pi/2)"),
+    ("phi", {"phi": 1.45}, "wavelength_x", 3.9, "phi -> pi/2: lambda -> 3.9 (at pi/2)"),
+]
+PAPER_CLASS = [
+    ({"vbar": 0.019}, "serpentine-coil"),
+    ({"vbar": 0.037}, "periodic-serpentine"),
+    ({"vbar": 0.12}, "irregular-serpentine"),
+]
+
+
+def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None) -> str:
+    g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
+    dt = "" if dt_factor is None else f"|dt={dt_factor:g}"
+    return f"{candidate}|{point['preset']}|{g}{dt}"
+
+
+def run_point(
+    point: dict[str, Any],
+    candidate: str,
+    dt_factor: float | None,
+    deposit: float | None,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """Run one point and measure it (in a worker process)."""
+    import numpy as np
+
+    from cnt_env.patterns import MeasureOptions, measure
+    from cnt_env.presets import RUN_DEPOSIT, RUN_TRANSIENT
+    from cnt_env.sim.deposition import ContactOptions, DepositionSim, default_config
+
+    changes = dict(CANDIDATES[candidate])
+    preset = point["preset"]
+    if preset == COIL:  # the candidates are stepped-substrate options; drag law applies
+        changes = {k: v for k, v in changes.items() if k in ("drag_law", "contact_mode")}
+    mode = changes.pop("contact_mode", None)
+    if mode is not None:
+        changes["contact"] = ContactOptions(mode=mode)
+    if dt_factor is not None:
+        changes["dt_factor"] = dt_factor
+    changes.update(point["groups"])
+    cfg = default_config(preset, **changes)
+    length = deposit if deposit is not None else RUN_DEPOSIT[preset]
+    transient = min(RUN_TRANSIENT[preset], 0.3 * length)
+    sim = DepositionSim(cfg, seed=seed)
+    t0 = time.time()
+    error = None
+    try:
+        sim.run(length)
+    except Exception as exc:
+        error = f"{type(exc).__name__}: {exc}"[:300]
+    wall = time.time() - t0
+    trace = sim.trace()
+    phi = cfg.params.phi
+    opts = MeasureOptions(transient_length=transient)
+    substrate = "flat" if cfg.params.kappa_c_bar is None else "stepped"
+    m = measure(trace, opts, substrate, flow_direction=(1.0, 0.0))
+    m_prog = measure(trace, opts, substrate, flow_direction=None)
+    p = cfg.params
+
+    def f(x: Any) -> Any:
+        return None if isinstance(x, float) and not math.isfinite(x) else x
+
+    rec = {
+        "key": point_key(point, candidate, dt_factor),
+        "row": point["row"],
+        "preset": preset,
+        "candidate": candidate,
+        "groups": point["groups"],
+        "vbar": p.vbar,
+        "phi": phi,
+        "kappa_c_bar": p.kappa_c_bar,
+        "Hbar": p.Hbar,
+        "Ibar": p.Ibar,
+        "delta_bar": p.delta_bar,
+        "dt_factor": cfg.dt_factor,
+        "drag_law": cfg.drag_law,
+        "sliding": cfg.sliding,
+        "snap": cfg.snap,
+        "friction": cfg.friction,
+        "tail_clamp": cfg.tail_clamp,
+        "tail_length": cfg.tail_length,
+        "contact_mode": cfg.contact.mode,
+        "deposit": length,
+        "transient": transient,
+        "error": error,
+        "pattern": m["pattern"],
+        "coil_radius": f(m["coil_radius"]),
+        "amplitude": f(m["amplitude"]),
+        "amplitude_cv": f(m["amplitude_cv"]),
+        "wavelength_x": f(m["wavelength"]),
+        "wavelength_cv": f(m["wavelength_cv"]),
+        "wavelength_prog": f(m_prog["wavelength"]),
+        "n_cycles": m["n_cycles"],
+        "n_loops": m["n_loops"],
+        "n_self_crossings": m["n_self_crossings"],
+        "loop_density": f(m.get("loop_density", math.nan)),
+        "wall_s": round(wall, 1),
+        "steps": sim.stats()["steps"],
+    }
+    return {"record": rec, "trace": np.asarray(trace[:, [0, 2]], dtype=np.float32)}
+
+
+def remeasure(out: Path) -> int:
+    """Re-measure every point whose trace is stored (after a change to patterns.py),
+    rewriting results.jsonl in place. Returns the number of points re-measured."""
+    import numpy as np
+
+    from cnt_env.patterns import MeasureOptions, measure
+
+    path = out / "results.jsonl"
+    recs = list(load_done(path).values())
+    n = 0
+    for rec in recs:
+        name = rec["key"].replace("|", "__").replace(",", "_")
+        f = out / "traces" / f"{name}.npy"
+        if not f.exists():
+            continue
+        trace = np.load(f).astype(np.float64)
+        opts = MeasureOptions(transient_length=rec["transient"])
+        sub = "flat" if rec["preset"] == COIL else "stepped"
+        m = measure(trace, opts, sub, flow_direction=(1.0, 0.0))
+
+        def f_(x: Any) -> Any:
+            return None if isinstance(x, float) and not math.isfinite(x) else x
+
+        rec.update(
+            pattern=m["pattern"], coil_radius=f_(m["coil_radius"]),
+            amplitude=f_(m["amplitude"]), amplitude_cv=f_(m["amplitude_cv"]),
+            wavelength_x=f_(m["wavelength"]), wavelength_cv=f_(m["wavelength_cv"]),
+            wavelength_prog=f_(m["wavelength_progression"]), n_cycles=m["n_cycles"],
+            n_loops=m["n_loops"], n_self_crossings=m["n_self_crossings"],
+            loop_density=f_(m["loop_density"]),
+        )  # fmt: skip
+        n += 1
+    path.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    return n
+
+
+def load_done(path: Path) -> dict[str, dict[str, Any]]:
+    done: dict[str, dict[str, Any]] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                rec = json.loads(line)
+                done[rec["key"]] = rec
+    return done
+
+
+def _fmt(x: Any, nd: int = 1) -> str:
+    return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
+
+
+def _match(rec: dict[str, Any], row: str, groups: dict[str, float]) -> bool:
+    if row in ("vbar", "phi") and rec["row"] in ("vbar", "phi") and rec["preset"] == SERP:
+        base = {"vbar": 0.037, "phi": 0.0}
+        g = {**base, **rec["groups"]}
+        want = {**base, **groups}
+        return all(abs(g.get(k, 0) - v) < 1e-9 for k, v in want.items()) and all(
+            k in ("vbar", "phi") for k in rec["groups"]
+        )
+    return rec["row"] == row and rec["groups"] == groups
+
+
+def summary(records: list[dict[str, Any]], candidate: str) -> str:
+    every = [r for r in records if r["candidate"] == candidate]
+    recs = [r for r in every if "|dt=" not in r["key"]]  # the default resolution
+    lines = [f"# Reproduction: candidate `{candidate}`", ""]
+    lines += [
+        "## Model against paper",
+        "",
+        "| quantity | paper | model | diff |",
+        "|---|---|---|---|",
+    ]
+    for row, groups, qty, value, note in PAPER:
+        hits = [r for r in recs if _match(r, row, groups) and r.get(qty) is not None]
+        if not hits:
+            lines.append(f"| {note} | {value:g} | not run | |")
+            continue
+        v = hits[0][qty]
+        lines.append(f"| {note} | {value:g} | {v:.2f} | {100 * (v / value - 1):+.1f}% |")
+    for groups, cls in PAPER_CLASS:
+        hits = [r for r in recs if _match(r, "vbar", groups)]
+        got = hits[0]["pattern"] if hits else "not run"
+        lines.append(f"| class at vbar = {groups['vbar']} | {cls} | {got} | |")
+    lines += ["", "## All points", "",
+              "| row | groups | class | A | lambda_x | lambda_prog | CV A | CV lambda | cycles "
+              "| loops | crossings | R0 | wall s | error |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in sorted(recs, key=lambda r: (r["row"], sorted(r["groups"].items()))):
+        g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
+        lines.append(
+            f"| {r['row']} | {g} | {r['pattern']} | {_fmt(r['amplitude'])} | "
+            f"{_fmt(r['wavelength_x'])} | {_fmt(r['wavelength_prog'])} | "
+            f"{_fmt(r['amplitude_cv'], 2)} | {_fmt(r['wavelength_cv'], 2)} | {r['n_cycles']} | "
+            f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
+            f"{r['wall_s']} | {r['error'] or ''} |"
+        )
+    other = [r for r in every if "|dt=" in r["key"]]
+    if other:
+        lines += ["", "## Other time steps (same points, dt_factor changed)", "",
+                  "| point | dt_factor | A | lambda_x | A at default | lambda_x at default |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for r in other:
+            base = [b for b in recs if b["key"] == r["key"].split("|dt=")[0]]
+            b = base[0] if base else {"amplitude": None, "wavelength_x": None}
+            g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
+            lines.append(
+                f"| {r['preset']} {g} | {r['dt_factor']:g} | {_fmt(r['amplitude'])} | "
+                f"{_fmt(r['wavelength_x'])} | {_fmt(b['amplitude'])} | "
+                f"{_fmt(b['wavelength_x'])} |"
+            )
+    total = sum(r["wall_s"] for r in recs)
+    lines += ["", f"Sum of per-point wall times: {total:.0f} s ({len(recs)} points)."]
+    return "\n".join(lines) + "\n"
+
+
+def _get(recs: list[dict[str, Any]], **want: float) -> dict[str, Any] | None:
+    base = {"vbar": 0.037, "phi": 0.0, "kappa_c_bar": 0.2, "Hbar": 155.0, "Ibar": 300.0}
+    want = {**base, **want}
+    for r in recs:
+        if r["preset"] != SERP or r["row"] == "delta" or r["delta_bar"] != 1.0:
+            continue
+        if all(abs((r[k] or 0) - v) < 1e-9 for k, v in want.items()):
+            return r
+    return None
+
+
+_SHORT = {"serpentine-coil": "SC", "periodic-serpentine": "P", "too_short": "TS",
+          "irregular-serpentine": "I"}  # fmt: skip
+
+
+def study_table(records: list[dict[str, Any]]) -> str:
+    """Candidate x row: A / lambda_x / class at each study point, and the checks."""
+    cands = sorted({r["candidate"] for r in records}, key=list(CANDIDATES).index)
+    cols = [("vbar", 0.019), ("vbar", 0.037), ("vbar", 0.07), ("vbar", 0.12),
+            ("phi", 0.44), ("phi", 0.87), ("phi", 1.2),
+            ("kappa_c_bar", 0.1), ("kappa_c_bar", 0.15)]  # fmt: skip
+    head = " | ".join(f"{k.split('_')[0]}={v:g}" for k, v in cols)
+    lines = [f"| candidate | {head} | checks passed |", "|---" * (len(cols) + 2) + "|"]
+    for c in cands:
+        recs = [r for r in records if r["candidate"] == c]
+        cells = []
+        for k, v in cols:
+            r = _get(recs, **{k: v})
+            if r is None:
+                cells.append("")
+                continue
+            cls = _SHORT.get(r["pattern"], r["pattern"])
+            cells.append(f"{_fmt(r['amplitude'])} / {_fmt(r['wavelength_x'])} {cls}")
+        ok, total = _checks(recs)
+        lines.append(f"| {c} | " + " | ".join(cells) + f" | {ok}/{total} |")
+    lines += ["", "Cells: A / lambda along x, class (SC serpentine-coil, P periodic, I irregular,",
+              "TS too short to judge).", "", "Checks:"]  # fmt: skip
+    lines += [f"- {name}" for name, _ in CHECKS]
+    return "\n".join(lines) + "\n"
+
+
+def _val(r: dict[str, Any] | None, key: str) -> float:
+    v = None if r is None else r.get(key)
+    return math.nan if v is None else float(v)
+
+
+def _within(x: float, target: float, rel: float = 0.25) -> bool:
+    return abs(x / target - 1.0) <= rel
+
+
+CHECKS: list[tuple[str, Any]] = [
+    ("baseline A in 26-33", lambda g: 26 <= _val(g(), "amplitude") <= 33),
+    ("baseline lambda in 6.3-8.3", lambda g: 6.3 <= _val(g(), "wavelength_x") <= 8.3),
+    ("A falls 0.019 -> 0.037 -> 0.07",
+     lambda g: _val(g(vbar=0.019), "amplitude") > _val(g(), "amplitude")
+     > _val(g(vbar=0.07), "amplitude")),
+    ("lambda rises 0.019 -> 0.037 -> 0.12",
+     lambda g: _val(g(vbar=0.019), "wavelength_x") < _val(g(), "wavelength_x")
+     < _val(g(vbar=0.12), "wavelength_x")),
+    ("A(0.07) within 25% of 25", lambda g: _within(_val(g(vbar=0.07), "amplitude"), 25.0)),
+    ("lambda(0.12) within 25% of 25",
+     lambda g: _within(_val(g(vbar=0.12), "wavelength_x"), 25.0)),
+    ("A rises with phi (0 -> 0.87 -> 1.2)",
+     lambda g: _val(g(), "amplitude") < _val(g(phi=0.87), "amplitude")
+     < _val(g(phi=1.2), "amplitude")),
+    ("lambda_x falls with phi (0 -> 0.87 -> 1.2)",
+     lambda g: _val(g(), "wavelength_x") > _val(g(phi=0.87), "wavelength_x")
+     > _val(g(phi=1.2), "wavelength_x")),
+    ("A, lambda at kappa_c 0.1 and 0.15 within 25% of kappa_c 0.2 (collapse)",
+     lambda g: all(_within(_val(g(kappa_c_bar=k), q), _val(g(), q))
+                   for k in (0.1, 0.15) for q in ("amplitude", "wavelength_x"))),
+    ("classes: serpentine-coil at 0.019, periodic at 0.037, irregular at 0.12",
+     lambda g: (g(vbar=0.019) or {}).get("pattern") == "serpentine-coil"
+     and (g() or {}).get("pattern") == "periodic-serpentine"
+     and (g(vbar=0.12) or {}).get("pattern") == "irregular-serpentine"),
+]  # fmt: skip
+
+
+def _checks(recs: list[dict[str, Any]]) -> tuple[int, int]:
+    def g(**kw: float) -> dict[str, Any] | None:
+        return _get(recs, **kw)
+
+    return sum(bool(fn(g)) for _, fn in CHECKS), len(CHECKS)
+
+
+def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    recs = [
+        r
+        for r in records
+        if r["candidate"] == candidate and r["preset"] == SERP and "|dt=" not in r["key"]
+    ]
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+    # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
+    by_k: dict[float, list[dict[str, Any]]] = {}
+    for r in recs:
+        if r["phi"] == 0 and r["Hbar"] == 155 and r["Ibar"] == 300:
+            by_k.setdefault(r["kappa_c_bar"], []).append(r)
+    for k, rs in sorted(by_k.items()):
+        rs = sorted(rs, key=lambda r: r["vbar"])
+        v = [r["vbar"] for r in rs]
+        axes[0, 0].plot(v, [r["amplitude"] or math.nan for r in rs], "o-", label=f"kc={k:g}")
+        axes[1, 0].plot(v, [r["wavelength_x"] or math.nan for r in rs], "o-", label=f"kc={k:g}")
+    axes[0, 0].plot([0.0, 0.037, 0.07], [100, 30, 25], "k--", label="paper (approx.)")
+    axes[1, 0].plot([0.0, 0.037, 0.13], [4, 7, 25], "k--", label="paper (approx.)")
+    axes[0, 0].set(xlabel="vbar", ylabel="A")
+    axes[1, 0].set(xlabel="vbar", ylabel="lambda (along x)")
+    axes[0, 0].legend(fontsize=7)
+    rs = sorted([r for r in recs if r["vbar"] == 0.037 and r["kappa_c_bar"] == 0.2
+                 and r["Hbar"] == 155 and r["Ibar"] == 300], key=lambda r: r["phi"])  # fmt: skip
+    f = [r["phi"] for r in rs]
+    axes[0, 1].plot(f, [r["amplitude"] or math.nan for r in rs], "o-", label="model")
+    axes[0, 1].plot([0, math.pi / 2], [32, 90], "k--", label="paper ends")
+    axes[1, 1].plot(f, [r["wavelength_x"] or math.nan for r in rs], "o-", label="along x")
+    axes[1, 1].plot(f, [r["wavelength_prog"] or math.nan for r in rs], "s-",
+                    label="along progression")  # fmt: skip
+    axes[1, 1].plot([0, math.pi / 2], [6.0, 3.9], "k--", label="paper ends")
+    axes[0, 1].set(xlabel="phi", ylabel="A")
+    axes[1, 1].set(xlabel="phi", ylabel="lambda")
+    axes[1, 1].legend(fontsize=7)
+    rs = sorted([r for r in recs if r["vbar"] == 0.037 and r["phi"] == 0 and r["Hbar"] == 155
+                 and r["Ibar"] == 300], key=lambda r: r["kappa_c_bar"])  # fmt: skip
+    kc = [r["kappa_c_bar"] for r in rs]
+    axes[0, 2].plot(kc, [r["amplitude"] or math.nan for r in rs], "o-", label="A")
+    axes[0, 2].plot(kc, [r["wavelength_x"] or math.nan for r in rs], "s-", label="lambda")
+    axes[0, 2].set(xlabel="kappa_c", title="vbar = 0.037")
+    axes[0, 2].legend(fontsize=7)
+    colours = {"serpentine-coil": "C3", "periodic-serpentine": "C2",
+               "irregular-serpentine": "C0"}  # fmt: skip
+    for r in recs:
+        if r["phi"] == 0 and r["Hbar"] == 155 and r["Ibar"] == 300:
+            axes[1, 2].scatter(r["kappa_c_bar"], r["vbar"], c=colours.get(r["pattern"], "0.5"))
+    for name, c in [*colours.items(), ("other", "0.5")]:
+        axes[1, 2].scatter([], [], c=c, label=name)
+    axes[1, 2].set(xlabel="kappa_c", ylabel="vbar", title="phases")
+    axes[1, 2].legend(fontsize=7)
+    fig.suptitle(f"candidate {candidate}")
+    fig.tight_layout()
+    fig.savefig(out / f"trends_{candidate}.png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--quick", action="store_true", help="a handful of short points (CI)")
+    ap.add_argument("--only", action="append", help="run only this row (repeatable)")
+    ap.add_argument("--study", action="store_true", help="the configuration-study points")
+    ap.add_argument("--delta", action="store_true", help="the delta finding points")
+    ap.add_argument(
+        "--study-points",
+        type=int,
+        default=None,
+        help="with --study: only the first N (most telling) points",
+    )
+    ap.add_argument("--candidate", action="append", help=f"one of {sorted(CANDIDATES)}")
+    ap.add_argument("--dt-factor", type=float, default=None)
+    ap.add_argument("--deposit", type=float, default=None, help="L_vb per point")
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/reproduce")
+    ap.add_argument("--max-wall", type=float, default=None, help="stop submitting after S s")
+    ap.add_argument("--no-traces", action="store_true")
+    ap.add_argument(
+        "--remeasure", action="store_true",
+        help="re-measure the stored traces, rewrite the summary and figures, run nothing",
+    )  # fmt: skip
+    args = ap.parse_args(argv)
+    candidates = args.candidate or ["default"]
+    for c in candidates:
+        if c not in CANDIDATES:
+            ap.error(f"unknown candidate {c!r}; choose from {sorted(CANDIDATES)}")
+    if args.jobs < 1:
+        ap.error("--jobs must be >= 1")
+    deposit = args.deposit if args.deposit is not None else (300.0 if args.quick else None)
+    if args.delta:
+        table = {"delta": list(DELTA_POINTS)}
+    elif args.study:
+        table = {"study": list(STUDY_POINTS)[: args.study_points]}
+    else:
+        table = rows(args.quick)
+    if args.only:
+        unknown = set(args.only) - set(table)
+        if unknown:
+            ap.error(f"unknown row(s) {sorted(unknown)}; choose from {sorted(table)}")
+        table = {k: v for k, v in table.items() if k in args.only}
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "traces").mkdir(exist_ok=True)
+    results = out / "results.jsonl"
+    if args.remeasure:
+        print(f"re-measured {remeasure(out)} points", flush=True)
+        table = {}
+    done = load_done(results)
+    todo = [(p, c) for c in candidates for row in table.values() for p in row
+            if point_key(p, c, args.dt_factor) not in done]  # fmt: skip
+    print(f"{len(todo)} points to run ({len(done)} already in {results})", flush=True)
+    t0 = time.time()
+    ctx = multiprocessing.get_context("spawn")
+    import numpy as np
+
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=ctx) as pool:
+        pending = {}
+        queue = list(todo)
+
+        def submit() -> None:
+            while queue and len(pending) < args.jobs:
+                if args.max_wall is not None and time.time() - t0 > args.max_wall:
+                    queue.clear()
+                    return
+                p, c = queue.pop(0)
+                fut = pool.submit(run_point, p, c, args.dt_factor, deposit)
+                pending[fut] = (p, c)
+
+        submit()
+        while pending:
+            fut = next(as_completed(pending))
+            pending.pop(fut)
+            res = fut.result()
+            rec = res["record"]
+            with results.open("a") as fh:
+                fh.write(json.dumps(rec) + "\n")
+            if not args.no_traces:
+                name = rec["key"].replace("|", "__").replace(",", "_")
+                np.save(out / "traces" / f"{name}.npy", res["trace"])
+            print(f"[{time.time() - t0:7.0f}s] {rec['key']}: {rec['pattern']} "
+                  f"A={_fmt(rec['amplitude'])} lx={_fmt(rec['wavelength_x'])} "
+                  f"R0={_fmt(rec['coil_radius'], 2)} ({rec['wall_s']} s)", flush=True)  # fmt: skip
+            submit()
+    wall = time.time() - t0
+    records = list(load_done(results).values())
+    if args.study:
+        (out / "study_table.md").write_text(study_table(records))
+    for c in candidates:
+        text = summary(records, c)
+        if not args.remeasure:
+            text += f"\nWall time of this invocation: {wall:.0f} s with --jobs {args.jobs}.\n"
+        (out / f"summary_{c}.md").write_text(text)
+        try:
+            figures(records, c, out)
+        except Exception as exc:
+            print(f"figures failed: {exc}", file=sys.stderr)
+    print(f"done in {wall:.0f} s; summary in {out}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONHASHSEED", "0")
+    raise SystemExit(main())
