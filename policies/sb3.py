@@ -1,14 +1,37 @@
-"""Trained SB3 models as policies: the model zip and the VecNormalize statistics saved
-beside it (training/train.py): ``<name>_vecnormalize.npz`` + ``.json`` (arrays and
-settings, read without pickle; :func:`save_vecnormalize`, :func:`load_vecnormalize`),
-and VecNormalize's own ``<name>_vecnormalize.pkl`` (``VecNormalize.load``), used when the
-npz is absent (models trained before it)."""
+"""Trained SB3 models as policies, loaded without running code from the model's folder.
+
+A model is ``<name>.zip`` (SB3), its VecNormalize statistics ``<name>_vecnormalize.npz``
++ ``.json`` (arrays and settings, read without pickle; :func:`save_vecnormalize`,
+:func:`load_vecnormalize`) and, for residual agents, ``<name>.yml`` (read with
+``yaml.safe_load``). See docs/security.md.
+
+By default (``trust=False``) :func:`load_policy`
+
+* reads the zip's ``data`` JSON itself and replaces EVERY cloudpickled entry (those with
+  a ``:serialized:`` key: policy class, spaces, schedules, buffers...) through SB3's
+  ``custom_objects``, so ``save_util.json_to_data`` never calls ``cloudpickle.loads``;
+  the replacements are rebuilt from the plain-text fields beside each blob and an
+  allowlist of SB3 classes; an entry it cannot rebuild makes it refuse the zip. The
+  weights are read by SB3 with ``torch.load(weights_only=True)``;
+* refuses a VecNormalize pickle (``<name>_vecnormalize.pkl``);
+* checks the files of the model against ``MANIFEST.json`` (sha256 per file) when the
+  model's folder has one (``policies/pretrained`` does; training writes one per run).
+
+``trust=True`` (``cnt-evaluate --trust``) loads with SB3's own (pickle) path, reads a
+VecNormalize pickle and turns a manifest mismatch into a warning: only for files you
+made yourself or got from someone you trust.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
-import pickle
+import re
+import warnings
+import zipfile
+from collections import deque
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,28 +39,239 @@ from .residual import combine, make_base_policy, residual_settings
 
 __all__ = [
     "ALGOS",
+    "MANIFEST_NAME",
     "NormalizerStats",
     "SB3Policy",
+    "UntrustedModelError",
+    "check_manifest",
+    "convert_vecnormalize_pickle",
     "load_policy",
     "load_vecnormalize",
+    "model_files",
+    "safe_custom_objects",
     "save_vecnormalize",
     "vecnormalize_path",
+    "write_manifest",
 ]
 
 ALGOS = ("ppo", "sac")
+MANIFEST_NAME = "MANIFEST.json"
+MANIFEST_FORMAT = "cnt_env manifest 1"
+TRUST_HINT = ("pass --trust (cnt-evaluate) or trust=True (policies.load_policy) only if "
+              "you made these files or trust who did; see docs/security.md")  # fmt: skip
+
+
+class UntrustedModelError(ValueError):
+    """A model file that cannot be loaded without the risk of running code from it
+    (a pickle, a zip entry that cannot be rebuilt from data, a manifest mismatch)."""
 
 
 def vecnormalize_path(model_path: str | Path) -> Path:
-    """Where the VecNormalize statistics of ``model_path`` (a ``.zip``) live."""
+    """The stem of the VecNormalize statistics of ``model_path`` (a ``.zip``):
+    ``<name>_vecnormalize`` + ``.npz`` / ``.json`` (``.pkl``: the old pickle)."""
     p = Path(model_path)
     return p.with_name(p.name.removesuffix(".zip") + "_vecnormalize.pkl")
 
 
-class SB3Policy:
-    """A trained PPO/SAC model, deterministic, with its observation normalisation.
+def model_files(model_path: str | Path) -> list[Path]:
+    """The files that make up the model ``model_path`` (those that exist or not):
+    the zip, its VecNormalize npz/json/pkl, and its ``.yml``."""
+    p = Path(model_path)
+    vn = vecnormalize_path(p)
+    return [p, vn.with_suffix(".npz"), vn.with_suffix(".json"), vn, p.with_suffix(".yml")]
 
-    The VecNormalize object is unpickled without a venv: only its ``obs_rms`` and
-    ``normalize_obs`` are used (rewards are not normalised at inference)."""
+
+# ---- checksum manifest --------------------------------------------------------------------
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def write_manifest(directory: str | Path, names: list[str] | None = None) -> Path:
+    """Write ``<directory>/MANIFEST.json``: the sha256 of ``names`` (default: every
+    regular file of the folder but the manifest itself)."""
+    d = Path(directory)
+    if names is None:
+        names = sorted(p.name for p in d.iterdir() if p.is_file() and p.name != MANIFEST_NAME)
+    files = {n: _sha256(d / n) for n in sorted(names)}
+    path = d / MANIFEST_NAME
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps({"format": MANIFEST_FORMAT, "sha256": files}, indent=2) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def check_manifest(model_path: str | Path, trust: bool = False) -> bool:
+    """Check the files of ``model_path`` (:func:`model_files`) against the
+    ``MANIFEST.json`` of its folder. Returns False if there is no manifest, True if
+    every file matches; raises :class:`UntrustedModelError` on a mismatch (a file that
+    differs, is missing, or is not listed), or warns instead if ``trust``."""
+    model_path = Path(model_path)
+    manifest = model_path.parent / MANIFEST_NAME
+    if not manifest.is_file():
+        return False
+    try:
+        listed = json.loads(manifest.read_text())["sha256"]
+        if not isinstance(listed, dict):
+            raise TypeError("sha256 is not an object")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        problems = [f"{manifest} is unreadable ({exc})"]
+    else:
+        problems = []
+        for f in model_files(model_path):
+            if f.name in listed and not f.is_file():
+                problems.append(f"{f.name} is listed but missing")
+            elif f.is_file() and f.name not in listed:
+                problems.append(f"{f.name} is not listed")
+            elif f.is_file() and _sha256(f) != listed[f.name]:
+                problems.append(f"{f.name} does not match its sha256")
+    if problems:
+        msg = f"{model_path}: checksum manifest {manifest} check failed: " + "; ".join(problems)
+        if not trust:
+            raise UntrustedModelError(f"{msg}. Refusing to load it; {TRUST_HINT}")
+        warnings.warn(f"{msg} (loading anyway: trusted)", stacklevel=2)
+    return True
+
+
+# ---- SB3 zips without cloudpickle ---------------------------------------------------------
+
+#: Policy classes a zip may name, per algorithm: (module, class names).
+_POLICY_CLASSES = {
+    "ppo": ("stable_baselines3.common.policies",
+            ("ActorCriticPolicy", "ActorCriticCnnPolicy", "MultiInputActorCriticPolicy")),
+    "sac": ("stable_baselines3.sac.policies", ("SACPolicy", "CnnPolicy", "MultiInputPolicy")),
+}  # fmt: skip
+_FLOAT = re.compile(r"[-+]?(?:\d+\.?\d*(?:[eE][-+]?\d+)?|\.\d+(?:[eE][-+]?\d+)?|inf|nan)")
+
+
+def _class_name(item: dict[str, Any]) -> str | None:
+    """The name of a serialized class, from the text of its ``__init__`` entry."""
+    m = re.fullmatch(r"<function (\w+)\.__init__ at 0x[0-9a-f]+>", str(item.get("__init__", "")))
+    return m.group(1) if m else None
+
+
+def _policy_class(item: dict[str, Any], algo: str):
+    import importlib
+
+    module, allowed = _POLICY_CLASSES[algo]
+    name = _class_name(item)
+    if item.get("__module__") != module or name not in allowed:
+        raise UntrustedModelError(f"policy_class {item.get('__module__')}.{name} is not one of "
+                                  f"{module}.{allowed}")  # fmt: skip
+    return getattr(importlib.import_module(module), name)
+
+
+def _bound(text: Any, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+    """A Box bound from its ``str(ndarray)`` text; a summarised text ("...") only if
+    every value shown is the same."""
+    s = str(text)
+    if not re.fullmatch(r"[\[\]\s\d.eE+\-infa]*(\.\.\.[\[\]\s\d.eE+\-infa]*)*", s):
+        raise UntrustedModelError(f"cannot read a Box bound from {s[:60]!r}")
+    values = [float(v) for v in _FLOAT.findall(s.replace("...", " "))]
+    if "..." in s:
+        if not values or len(set(values)) != 1:
+            raise UntrustedModelError("a summarised Box bound with different values")
+        return np.full(shape, values[0], dtype=dtype)
+    if len(values) != int(np.prod(shape)):
+        raise UntrustedModelError(f"a Box bound with {len(values)} values for shape {shape}")
+    return np.array(values, dtype=dtype).reshape(shape)
+
+
+def _box(item: dict[str, Any]):
+    from gymnasium import spaces
+
+    if item.get(":type:") != "<class 'gymnasium.spaces.box.Box'>":
+        raise UntrustedModelError(f"space of type {item.get(':type:')} (only Box is rebuilt)")
+    try:
+        shape = tuple(int(n) for n in item["_shape"])
+        dtype = np.dtype(str(item["dtype"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UntrustedModelError(f"cannot read a Box from {sorted(item)}") from exc
+    if dtype.kind not in "fiu":
+        raise UntrustedModelError(f"a Box of dtype {dtype}")
+    low, high = _bound(item.get("low"), shape, dtype), _bound(item.get("high"), shape, dtype)
+    return spaces.Box(low=low, high=high, shape=shape, dtype=dtype)
+
+
+def _schedule_value(item: dict[str, Any], default: float) -> float:
+    m = re.fullmatch(r"ConstantSchedule\(val=([-+0-9.eE]+)\)", str(item.get("value_schedule")))
+    return float(m.group(1)) if m else default
+
+
+def _train_freq(item: dict[str, Any]):
+    from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+    return TrainFreq(1, TrainFrequencyUnit.STEP)
+
+
+#: How each serialized entry is rebuilt (inference needs only the policy class and the
+#: spaces; the others are training state, replaced by neutral values).
+_REBUILD = {
+    "policy_class": _policy_class,
+    "observation_space": lambda item, algo: _box(item),
+    "action_space": lambda item, algo: _box(item),
+    "lr_schedule": lambda item, algo: _schedule_value(item, 0.0),
+    "learning_rate": lambda item, algo: 0.0,
+    "clip_range": lambda item, algo: _schedule_value(item, 0.2),
+    "clip_range_vf": lambda item, algo: None,
+    "_last_obs": lambda item, algo: None,
+    "_last_episode_starts": lambda item, algo: None,
+    "_last_original_obs": lambda item, algo: None,
+    "ep_info_buffer": lambda item, algo: deque(maxlen=100),
+    "ep_success_buffer": lambda item, algo: deque(maxlen=100),
+    "rollout_buffer_class": lambda item, algo: None,
+    "replay_buffer_class": lambda item, algo: None,
+    "train_freq": lambda item, algo: _train_freq(item),
+    "action_noise": lambda item, algo: None,
+}
+
+
+def safe_custom_objects(model_path: str | Path, algo: str) -> dict[str, Any]:
+    """The ``custom_objects`` that replace every cloudpickled entry of the zip's ``data``
+    (so SB3's ``json_to_data`` unpickles nothing). Raises :class:`UntrustedModelError`
+    if an entry cannot be rebuilt from data."""
+    model_path = Path(model_path)
+    try:
+        with zipfile.ZipFile(model_path) as z:
+            data = json.loads(z.read("data"))
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as exc:
+        raise UntrustedModelError(f"{model_path} is not an SB3 model zip ({exc})") from exc
+    if not isinstance(data, dict):
+        raise UntrustedModelError(f"{model_path}: its data entry is not a JSON object")
+    custom: dict[str, Any] = {}
+    for key, item in data.items():
+        if not (isinstance(item, dict) and ":serialized:" in item):
+            continue
+        if key == "lr_schedule" and isinstance(data.get("learning_rate"), (int, float)):
+            custom[key] = float(data["learning_rate"])
+            continue
+        rebuild = _REBUILD.get(key)
+        if rebuild is None:
+            raise UntrustedModelError(f"{model_path}: the pickled entry {key!r} cannot be "
+                                      f"rebuilt without unpickling it; {TRUST_HINT}")  # fmt: skip
+        try:
+            custom[key] = rebuild(item, algo)
+        except UntrustedModelError as exc:
+            raise UntrustedModelError(f"{model_path}: entry {key!r}: {exc}; {TRUST_HINT}") from exc
+    # everything SB3 would unpickle is replaced: check it once more
+    left = [k for k, v in data.items()
+            if isinstance(v, dict) and ":serialized:" in v and k not in custom]  # fmt: skip
+    assert not left, left
+    return custom
+
+
+# ---- the policy ---------------------------------------------------------------------------
+
+
+class SB3Policy:
+    """A trained PPO/SAC model, deterministic, with its observation normalisation
+    (``normalize_obs`` of :class:`NormalizerStats`; rewards are not normalised at
+    inference)."""
 
     def __init__(self, model, vecnormalize=None, name: str = "sb3", base=None,
                  scale: float = 0.0) -> None:  # fmt: skip
@@ -63,27 +297,61 @@ class SB3Policy:
         return a
 
 
-def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu") -> SB3Policy:
+def algo_of(model_path: str | Path, algo: str | None = None) -> str:
+    if algo is None:
+        algo = next((a for a in ALGOS if a in Path(model_path).name.lower()), None)
+    if algo not in ALGOS:
+        raise ValueError(f"cannot tell the algorithm of {model_path} from its name; name it "
+                         f"with one of {ALGOS} (e.g. ppo.zip)")  # fmt: skip
+    return algo
+
+
+def check_model(model_path: str | Path, algo: str | None = None, trust: bool = False) -> None:
+    """Everything :func:`load_policy` refuses, checked without loading the model (so a
+    command can fail before it starts workers)."""
+    model_path = Path(model_path)
+    if not model_path.is_file():
+        raise FileNotFoundError(f"no model at {model_path}")
+    algo = algo_of(model_path, algo)
+    check_manifest(model_path, trust)
+    if trust:
+        return
+    safe_custom_objects(model_path, algo)
+    vn = vecnormalize_path(model_path)
+    has_data = vn.with_suffix(".npz").is_file() and vn.with_suffix(".json").is_file()
+    if not has_data and vn.is_file():
+        raise UntrustedModelError(
+            f"{vn} is a pickle (loading it can run any code) and there is no "
+            f"{vn.with_suffix('.npz').name} + .json beside it; convert it once with "
+            f"policies.sb3.convert_vecnormalize_pickle if you trust it, or {TRUST_HINT}"
+        )
+
+
+def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu",
+                trust: bool = False) -> SB3Policy:  # fmt: skip
     """Load ``model_path`` (``.zip``; ``algo`` from the file name if not given), the
     VecNormalize statistics beside it, if any, and, if the resolved config beside it
-    (``<name>.yml``) says the agent is residual, its base policy."""
+    (``<name>.yml``) says the agent is residual, its base policy.
+
+    Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
+    cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
     from stable_baselines3 import PPO, SAC
 
     model_path = Path(model_path)
-    if algo is None:
-        algo = next((a for a in ALGOS if a in model_path.name.lower()), None)
-    if algo not in ALGOS:
-        raise ValueError(f"cannot tell the algorithm of {model_path}; pass algo in {ALGOS}")
+    algo = algo_of(model_path, algo)
+    check_model(model_path, algo, trust)
     cls = {"ppo": PPO, "sac": SAC}[algo]
-    model = cls.load(str(model_path), device=device)
+    if trust:
+        model = cls.load(str(model_path), device=device)
+    else:
+        model = cls.load(str(model_path), device=device,
+                         custom_objects=safe_custom_objects(model_path, algo))  # fmt: skip
     vn = None
     vn_path = vecnormalize_path(model_path)
     if vn_path.with_suffix(".npz").is_file() and vn_path.with_suffix(".json").is_file():
         vn = load_vecnormalize(vn_path)
-    elif vn_path.is_file():
-        with vn_path.open("rb") as fh:
-            vn = pickle.load(fh)
-        vn.training = False
+    elif vn_path.is_file():  # only with trust (check_model)
+        vn = _load_vecnormalize_pickle(vn_path)
     base, scale = None, 0.0
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
@@ -100,6 +368,9 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
             base = make_base_policy(residual.get("base", "scripted"), CNTDepositEnv(**env_kwargs))
             scale = float(residual.get("scale", 0.5))
     return SB3Policy(model, vn, name=algo, base=base, scale=scale)
+
+
+# ---- VecNormalize statistics as data ------------------------------------------------------
 
 
 class NormalizerStats:
@@ -142,7 +413,29 @@ def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
 def load_vecnormalize(stem: Path) -> NormalizerStats:
     """The statistics written by :func:`save_vecnormalize` (for inference)."""
     stem = Path(stem)
-    meta = json.loads(stem.with_suffix(".json").read_text())
-    with np.load(stem.with_suffix(".npz")) as d:
-        return NormalizerStats(d["obs_mean"], d["obs_var"], float(d["obs_count"]),
-                               meta["clip_obs"], meta["epsilon"], meta["norm_obs"])  # fmt: skip
+    try:
+        meta = json.loads(stem.with_suffix(".json").read_text())
+        with np.load(stem.with_suffix(".npz"), allow_pickle=False) as d:
+            return NormalizerStats(np.asarray(d["obs_mean"], dtype=np.float64),
+                                   np.asarray(d["obs_var"], dtype=np.float64),
+                                   float(d["obs_count"]), float(meta["clip_obs"]),
+                                   float(meta["epsilon"]), bool(meta["norm_obs"]))  # fmt: skip
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        msg = f"cannot read the VecNormalize statistics {stem}.npz/.json: {exc}"
+        raise ValueError(msg) from exc
+
+
+def _load_vecnormalize_pickle(path: Path):
+    import pickle
+
+    with Path(path).open("rb") as fh:
+        vn = pickle.load(fh)  # only with trust=True (check_model)
+    vn.training = False
+    return vn
+
+
+def convert_vecnormalize_pickle(pkl_path: str | Path) -> tuple[Path, Path]:
+    """TRUSTED step: unpickle ``<name>_vecnormalize.pkl`` (this runs whatever code it
+    holds) and write its statistics as ``.npz`` + ``.json`` beside it."""
+    pkl_path = Path(pkl_path)
+    return save_vecnormalize(_load_vecnormalize_pickle(pkl_path), pkl_path.with_suffix(""))

@@ -4,6 +4,7 @@ validations live in benchmarks/ and the slow tests."""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -149,3 +150,24 @@ def test_newton_failure_raises_simulation_error_with_state() -> None:
     assert err.step >= 0 and math.isfinite(err.time)
     assert np.all(np.isfinite(err.state["q"]))
     assert "did not converge" in str(err)
+
+
+def test_node_cap_refuses_a_rod_too_large_before_allocating() -> None:
+    huge = paper_groups("serpentine", Hbar=1.0e7)  # ~1e7 nodes at delta = 1
+    with pytest.raises(ValueError, match="max_nodes"):
+        DepositionConfig(params=huge, initial_radius=3.9)
+    with pytest.raises(ValueError, match="max_nodes"):
+        DepositionConfig(params=paper_groups("coil"), max_nodes=3)
+    # the default presets fit far below the cap
+    assert DepositionConfig(params=paper_groups("serpentine"), initial_radius=3.9).max_nodes
+
+
+def test_node_cap_stops_a_growing_rod_with_a_simulation_error() -> None:
+    cfg = small_config()
+    sim = DepositionSim(cfg, seed=0)
+    capped = copy.copy(cfg)  # past the constructor's estimate: the cap hit while running
+    object.__setattr__(capped, "max_nodes", sim.rod.n_nodes)
+    sim.config = capped
+    sim.rod.q[4 * (sim.rod.n_nodes - 1) + 1] -= 5.0  # the top below H - delta: must grow
+    with pytest.raises(SimulationError, match="max_nodes"):
+        sim._inject()

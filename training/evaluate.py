@@ -4,6 +4,7 @@
                  [--seeds 0,1,2] [--models policies/pretrained] [--runs DIR ...]
                  [--config training/configs/ppo.yml] [--constant-from FILE]
                  [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
+                 [--video DIR [--video-format mp4|gif]] [--trust]
 
 For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 with the
 env settings of ``--config`` (the ones the models were trained with) and writes, in
@@ -26,7 +27,12 @@ env settings of ``--config`` (the ones the models were trained with) and writes,
 
 ``--save-episodes DIR`` saves every episode with :class:`cnt_env.replay.EpisodeSaver`
 (``cnt_env.episode`` npz files); ``--rrd DIR`` also writes a rerun recording of each
-policy's first-seed episode per target (skipped with a message if rerun is missing).
+policy's first-seed episode per target (skipped with a message if rerun is missing);
+``--video DIR`` writes an MP4 (``--video-format gif``: a GIF) of every episode
+(:func:`cnt_env.replay.write_video`; needs the video extra).
+
+Models are loaded without running code from their files (:func:`policies.load_policy`,
+docs/security.md); ``--trust`` lifts that for files you trust.
 """
 
 from __future__ import annotations
@@ -92,7 +98,7 @@ def _make_policy(spec: dict[str, Any], env):
         if env.unwrapped.score_mode == "corridor":
             return RouteFollower.from_env(env)
         return ScriptedPolicy.from_env(env)
-    return load_policy(spec["model"])
+    return load_policy(spec["model"], trust=bool(spec.get("trust")))
 
 
 def run_episode(job: dict[str, Any]) -> dict[str, Any]:
@@ -116,6 +122,7 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
         if terminated or truncated:
             break
     base = env.unwrapped
+    corridor = getattr(base.target, "width", None)  # route task: the corridor half-width
     trace = base.sim.trace()
     n0 = base.episode_start
     origin = trace[n0 - 1, [0, 2]]
@@ -132,6 +139,7 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
         "row": row,
         "trace": trace[n0 - 1 :, [0, 2]] - origin,
         "target_points": base.target_path - origin,
+        "corridor": None if corridor is None else float(corridor),
         "episode_file": str(rec[-1]) if rec else None,
     }
 
@@ -280,8 +288,10 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
     policies = list(dict.fromkeys(r["row"]["policy"] for r in results))
 
     def draw(ax, t):
-        tgt = next(first[(p, t)]["target_points"] for p in policies if (p, t) in first)
-        ax.plot(tgt[:, 0], tgt[:, 1], color="red", lw=6, alpha=0.25, label="target")
+        from cnt_env.plotting import draw_route
+
+        r0 = next(first[(p, t)] for p in policies if (p, t) in first)
+        draw_route(ax, r0["target_points"], corridor=r0.get("corridor"))
         for p in policies:
             if (p, t) in first:
                 tr = first[(p, t)]["trace"]
@@ -370,6 +380,27 @@ def _rrd(results: Sequence[dict[str, Any]], rrd_dir: Path) -> list[Path]:
     return paths
 
 
+def _videos(results: Sequence[dict[str, Any]], video_dir: Path, fmt: str) -> list[Path]:
+    """One video (``fmt``: mp4 or gif) per evaluated episode, from its episode file
+    (:func:`cnt_env.replay.write_video`); skipped with a message without the video extra."""
+    from cnt_env import replay
+
+    video_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for r in results:
+        if not r.get("episode_file"):
+            continue
+        row = r["row"]
+        path = video_dir / f"{row['policy']}_{row['target']}_s{row['seed']}.{fmt}"
+        try:
+            replay.write_video(r["episode_file"], path)
+        except ImportError as exc:
+            print(f"--video skipped: {exc}")
+            return paths
+        paths.append(path)
+    return paths
+
+
 def evaluate(
     policies: Sequence[str],
     targets: Sequence[str],
@@ -383,6 +414,9 @@ def evaluate(
     save_episodes: Path | None = None,
     rrd: Path | None = None,
     reuse: Sequence[Path] = (),
+    trust: bool = False,
+    video: Path | None = None,
+    video_format: str = "mp4",
 ) -> list[dict[str, Any]]:
     """Run the evaluation and write the tables and plots (module doc). Returns the table."""
     limit_threads()
@@ -392,7 +426,7 @@ def evaluate(
     t0 = time.perf_counter()
     ctx = mp.get_context("forkserver")
     tmp = None
-    if rrd is not None and save_episodes is None:
+    if (rrd is not None or video is not None) and save_episodes is None:
         tmp = tempfile.TemporaryDirectory()
         save_episodes = Path(tmp.name)
     reused: set[str] = set()
@@ -421,15 +455,20 @@ def evaluate(
                 continue
             trained = p not in BASELINES
             if trained:
+                from policies.sb3 import check_model
+
                 model = Path(models) / f"{p}.zip"
                 if not model.is_file():
-                    raise FileNotFoundError(f"no {p} model at {model}; train one with cnt-train")
+                    raise FileNotFoundError(f"no {p} model at {model} (--models); train one "
+                                            "with cnt-train")  # fmt: skip
+                check_model(model, trust=trust)  # refuses before any worker starts
             for t in targets:
                 spec = {"kind": p}
                 if p == "constant":
                     spec.update(vbar=best[t]["vbar"], phi=best[t]["phi"])
                 if trained:
                     spec["model"] = str(Path(models) / f"{p}.zip")
+                    spec["trust"] = bool(trust)
                 specs[p] = spec
                 for s in seeds:
                     job_list.append({
@@ -476,6 +515,10 @@ def evaluate(
         paths = _rrd(results, Path(rrd))
         if paths:
             print(f"rerun recordings: {len(paths)} in {rrd}")
+    if video is not None:
+        paths = _videos(results, Path(video), video_format)
+        if paths:
+            print(f"videos: {len(paths)} in {video}")
     if tmp is not None:
         tmp.cleanup()
     wall = time.perf_counter() - t0
@@ -522,16 +565,25 @@ def _csv_list(text: str) -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0])
-    p.add_argument("--policies", default=",".join(ALL_POLICIES))
+    p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+    p.add_argument("--policies", default=",".join(ALL_POLICIES),
+                   help="comma separated: random, constant, scripted, or a model name "
+                        "<name> (--models/<name>.zip)")  # fmt: skip
     p.add_argument("--targets", default="all",
                    help="held-out names (routes, or thin targets with score: thin), comma "
                         "separated, or all")  # fmt: skip
-    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--seeds", default="0,1,2", help="comma separated episode seeds")
     p.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml",
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
     p.add_argument("--models", type=Path, default=PRETRAINED,
-                   help="directory of ppo.zip / sac.zip and *_vecnormalize.pkl")  # fmt: skip
+                   help="directory of the models <policy>.zip, their <policy>_vecnormalize"
+                        ".npz + .json and MANIFEST.json")  # fmt: skip
+    p.add_argument("--trust", action="store_true",
+                   help="also load what cannot be loaded without running code from the "
+                        "file (a *_vecnormalize.pkl, a zip whose pickled entries cannot be "
+                        "rebuilt) and models that fail their MANIFEST.json; only for files "
+                        "you trust (docs/security.md)")  # fmt: skip
     p.add_argument("--runs", type=Path, nargs="*", default=[],
                    help="training run directories for the learning curves")  # fmt: skip
     p.add_argument("--constant-from", type=Path, default=None,
@@ -539,10 +591,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=None,
                    help="results directory (default: a new runs/evaluate/<task>, never "
                         "the committed training/results unless given)")  # fmt: skip
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--jobs", type=int, default=2, help="worker processes")
     p.add_argument("--save-episodes", type=Path, default=None,
                    help="save every episode (cnt_env.replay episode npz) here")  # fmt: skip
     p.add_argument("--rrd", type=Path, default=None, help="write rerun recordings here")
+    p.add_argument("--video", type=Path, default=None,
+                   help="write a video of every evaluated episode here (needs the video "
+                        "extra: imageio + imageio-ffmpeg)")  # fmt: skip
+    p.add_argument("--video-format", choices=("mp4", "gif"), default="mp4",
+                   help="format of the --video files")  # fmt: skip
     p.add_argument("--reuse", type=Path, nargs="*", default=[],
                    help="reuse the episodes of policies fully evaluated in these results "
                         "dirs (episodes.json + traces.npz); run only the others")  # fmt: skip
@@ -557,13 +614,20 @@ def main(argv: list[str] | None = None) -> int:
     targets = list(names) if args.targets == "all" else _csv_list(args.targets)
     seeds = [int(s) for s in _csv_list(args.seeds)]
     if len(seeds) < 1:
-        raise SystemExit("give at least one seed")
+        raise SystemExit("--seeds: give at least one seed")
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
     print(f"results -> {out}")
-    evaluate(_csv_list(args.policies), targets, seeds, config, out,
-             models=args.models, runs=args.runs, constant_from=args.constant_from,
-             jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
-             reuse=args.reuse)  # fmt: skip
+    from policies.sb3 import UntrustedModelError
+
+    try:
+        evaluate(_csv_list(args.policies), targets, seeds, config, out,
+                 models=args.models, runs=args.runs, constant_from=args.constant_from,
+                 jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
+                 reuse=args.reuse, trust=args.trust, video=args.video,
+                 video_format=args.video_format)  # fmt: skip
+    except (UntrustedModelError, FileNotFoundError) as exc:
+        print(f"cnt-evaluate: error: {exc}", file=sys.stderr)
+        return 2  # EXIT_USAGE (docs/cli.md)
     return 0
 
 

@@ -7,14 +7,17 @@ One run directory ``<out>/<algo>_s<seed>/`` (``_2``, ``_3``, ... when it exists:
 never overwrites an earlier one) holds:
 
 * ``<algo>.zip``; the VecNormalize statistics beside it as
-  ``<algo>_vecnormalize.npz`` + ``.json`` (no pickle; :func:`policies.load_policy` reads
-  them) and VecNormalize's own ``<algo>_vecnormalize.pkl`` (``VecNormalize.load``);
+  ``<algo>_vecnormalize.npz`` + ``.json`` (data, no pickle: :func:`policies.load_policy`
+  reads them; docs/security.md) and VecNormalize's own ``<algo>_vecnormalize.pkl``
+  (``VecNormalize.load``, for SB3 / rl-zoo tools; a pickle: load only your own);
+* ``MANIFEST.json``: the sha256 of the model files (zip, statistics, ``<algo>.yml``),
+  checked by :func:`policies.load_policy`;
 * ``best_model.zip`` (EvalCallback: the best mean return on the held-out routes);
 * ``config.yml`` and ``<algo>.yml``: the resolved config (hyperparameters, env kwargs,
   seed, budget, versions, wall time);
 * ``evaluations.npz`` (EvalCallback on held-out targets) and ``learning_curve.csv``;
-* ``checkpoints/`` (CheckpointCallback, with VecNormalize), ``monitor/`` (Monitor CSVs),
-  ``tb/`` (tensorboard: SB3's scalars and the task metrics under ``task/``: score,
+* ``checkpoints/`` (CheckpointCallback, with the VecNormalize pickle and npz + JSON), ``monitor/``
+  (Monitor CSVs), ``tb/`` (tensorboard: SB3's scalars and the task metrics under ``task/``: score,
   coverage, progress, inside, shorts, completion of every finished episode).
 
 Configs are rl-zoo style (one YAML file per algorithm, an entry ``CNTDeposit-v0``):
@@ -43,7 +46,7 @@ import yaml
 
 from cnt_env.io import to_jsonable
 from policies.residual import residual_settings
-from policies.sb3 import save_vecnormalize, vecnormalize_path
+from policies.sb3 import model_files, save_vecnormalize, vecnormalize_path, write_manifest
 
 from .callbacks import make_task_metrics
 from .common import (
@@ -189,8 +192,12 @@ def train(
             )
         )
     if ev["save_freq"] > 0:
-        ckpt = CheckpointCallback(max(1, ev["save_freq"] // n_envs), str(run / "checkpoints"),
-                                  name_prefix=algo, save_vecnormalize=bool(norm))  # fmt: skip
+        ckpt = _checkpoint_callback(CheckpointCallback)(
+            max(1, ev["save_freq"] // n_envs),
+            str(run / "checkpoints"),
+            name_prefix=algo,
+            save_vecnormalize=bool(norm),
+        )
         callbacks.append(ckpt)
     ProgressBar, WallClockLimit = _callbacks_module()
     if progress_bar:
@@ -233,8 +240,25 @@ def train(
     # beside the model too, for policies.load_policy (the residual base, the env settings)
     with (run / f"{algo}.yml").open("w") as fh:
         yaml.safe_dump(resolved, fh, sort_keys=False)
+    models = [model_path, run / "best_model.zip"]
+    write_manifest(run, [f.name for m in models for f in model_files(m) if f.is_file()])
     print(f"{algo}: {model.num_timesteps} steps in {wall:.0f} s -> {model_path}")
     return model_path
+
+
+def _checkpoint_callback(base):
+    """SB3's CheckpointCallback (``base``) that also saves the VecNormalize statistics of
+    each checkpoint as npz + JSON beside it (``<algo>_<n>_steps_vecnormalize``)."""
+
+    class Checkpoint(base):
+        def _on_step(self) -> bool:
+            ok = super()._on_step()
+            venv = self.model.get_vec_normalize_env()
+            if self.n_calls % self.save_freq == 0 and venv is not None:
+                save_vecnormalize(venv, vecnormalize_path(self._checkpoint_path(extension="zip")))
+            return ok
+
+    return Checkpoint
 
 
 def _write_learning_curve(run: Path) -> None:

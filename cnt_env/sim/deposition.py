@@ -94,7 +94,9 @@ class DepositionConfig:
     speed scale 1/Hbar, whatever delta (the dynamics near the contact are set by L_vb, not
     by delta; touchdowns are located inside a step by the event search). ``initial_radius``
     is R_i of the start-up contact arc; ``perturbation`` the seeded out-of-plane noise in
-    units of delta.
+    units of delta. ``max_nodes`` caps the solved rod: a configuration whose estimated
+    node count exceeds it is refused here, and a rod that grows past it while running (a
+    lost contact) raises SimulationError instead of exhausting memory.
     """
 
     params: DimensionlessParams
@@ -110,6 +112,7 @@ class DepositionConfig:
     friction: float = MODEL["friction"]
     snap: str = MODEL["snap"]
     snap_stiffness: float = 1.0e4
+    max_nodes: int = 200_000
     tail_clamp: str = MODEL["tail_clamp"]
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=NewtonOptions)
@@ -127,6 +130,20 @@ class DepositionConfig:
             )
         if self.initial_radius >= p.Hbar:
             raise ValueError("initial_radius must be below Hbar")
+        # the solved rod: the suspended part (~Hbar + the start-up arc, at the injection
+        # spacing) and the deposited tail; refuse before allocating what cannot run
+        if not (isinstance(self.max_nodes, int) and self.max_nodes >= 16):
+            raise ValueError(f"max_nodes must be an int >= 16, got {self.max_nodes!r}")
+        inject = self.coarse_delta or p.delta_bar
+        fine = min(self.fine_length, p.Hbar) / p.delta_bar
+        estimate = fine + (p.Hbar + self.initial_radius) / inject + self.tail_length / p.delta_bar
+        if estimate > self.max_nodes:
+            raise ValueError(
+                f"this configuration needs ~{estimate:.3g} rod nodes (Hbar = {p.Hbar:g}, "
+                f"delta_bar = {p.delta_bar:g}), more than max_nodes = {self.max_nodes}: "
+                "coarsen delta_bar (or coarse_delta), lower Hbar, or raise max_nodes if "
+                "you have the memory and time"
+            )
         if self.sliding not in SLIDING_OPTIONS:
             raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
         if not (math.isfinite(self.friction) and self.friction >= 0):
@@ -295,6 +312,12 @@ class DepositionSim:
             prev = rod.q[4 * (n - 2) : 4 * (n - 2) + 3]
             t = (top - prev) / np.linalg.norm(top - prev)
             d = self.inject_delta
+            if n >= self.config.max_nodes:
+                raise SimulationError(
+                    f"the rod reached max_nodes = {self.config.max_nodes} nodes (the suspended "
+                    "part keeps growing: is the contact lost?)",
+                    rod.steps, self.time, self.dt, rod.snapshot(),
+                )  # fmt: skip
             rod.append_node(top + d * t, rod.u[4 * (n - 1) : 4 * (n - 1) + 3].copy(), d)
 
     def _refine(self) -> None:
