@@ -28,7 +28,14 @@ from typing import TYPE_CHECKING, Any
 
 from cnt_env import units
 from cnt_env.io import package_version
-from cnt_env.presets import DEFAULT_KAPPA_C, INITIAL_RADIUS, MESH, RUN_DEPOSIT, RUN_TRANSIENT
+from cnt_env.presets import (
+    DEFAULT_KAPPA_C,
+    INITIAL_RADIUS,
+    MESH,
+    MODEL,
+    RUN_DEPOSIT,
+    RUN_TRANSIENT,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -252,8 +259,8 @@ class RunOptions:
     seed: int = 0
     transient: float | None = None
     dt: float | None = None
-    drag_law: str = "linear"
-    sliding: str = "B"
+    drag_law: str = MODEL["drag_law"]
+    sliding: str = MODEL["sliding"]
     coarse_delta: float | None = None
     fine_length: float = 20.0
     contact_mode: str = "event"

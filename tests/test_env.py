@@ -131,8 +131,9 @@ def test_import_is_light_and_registers_the_env() -> None:
 
 
 def test_defaults_are_the_paper_serpentine_baseline() -> None:
-    route = CNTDepositEnv()  # the route task: 12 Hbar per step, the corridor's slice
-    assert route.score_mode == "corridor" and route.n_substeps == 60
+    route = CNTDepositEnv()  # the route task: 30 Hbar per step, the corridor's slice
+    assert route.score_mode == "corridor"
+    assert route.n_substeps * route.dt == pytest.approx(30.0 * 155.0)
     assert route.observation_space.shape == (84,)
     assert list(route.observation_structure)[-1] == "route"
     env = CNTDepositEnv(score="thin")  # construction only: no simulation until reset
@@ -452,6 +453,31 @@ def test_render_modes(kw: dict) -> None:
     human.close()
 
 
+@pytest.mark.parametrize("style", ["figure", "raster"])
+def test_render_styles(kw: dict, style: str) -> None:
+    env = make(kw, render_mode="rgb_array", render_size=160, render_style=style)
+    env.reset(seed=0)
+    first = env.render()
+    env.step(np.zeros(2, np.float32))
+    frame = env.render()
+    assert frame.shape == first.shape == (160, 160, 3) and frame.dtype == np.uint8
+    assert not np.array_equal(frame, first)  # the trace and rod moved
+    env.reset(seed=1)  # a new episode: a new fixed extent, same frame size
+    assert env.render().shape == (160, 160, 3)
+
+
+def test_figure_render_keeps_its_extent_within_an_episode(kw: dict) -> None:
+    env = make(kw, render_mode="rgb_array", render_size=160)
+    env.reset(seed=0)
+    env.render()
+    extent = env.unwrapped._renderer.view.ax.get_xlim(), env.unwrapped._renderer.view.ax.get_ylim()
+    for _ in range(3):
+        env.step(np.ones(2, np.float32))
+        env.render()
+    view = env.unwrapped._renderer.view
+    assert (view.ax.get_xlim(), view.ax.get_ylim()) == extent
+
+
 # ---- vector envs ---------------------------------------------------------------------------
 
 
@@ -685,8 +711,10 @@ def test_route_task_spaces_and_reward_terms(rkw: dict) -> None:
         check_env(env, skip_render_check=True)
     obs, info = env.reset(seed=1, options={"target": "u_turn"})
     assert obs.shape == (84,) and env.observation_space.contains(obs)
-    assert info["route_width"] == 15.0 and info["score"] == 0.0
-    assert obs[env.observation_slices["route"]][0] == 15.0
+    from cnt_env.task.routes import DEFAULT_HALF_WIDTH
+
+    assert info["route_width"] == DEFAULT_HALF_WIDTH and info["score"] == 0.0
+    assert obs[env.observation_slices["route"]][0] == np.float32(DEFAULT_HALF_WIDTH)
     total = 0.0
     for a in actions(3, 12):
         obs, r, _, _, info = env.step(a)
@@ -775,3 +803,17 @@ def test_route_task_is_deterministic_and_pickles(rkw: dict) -> None:
     for i, (sa, sb) in enumerate(zip(rollout(a, more), rollout(copy, more), strict=True)):
         if len(sa) == 5:
             assert_same_step(sa, sb, f"after pickling, step {i}")
+
+
+def test_record_video_writes_an_mp4(kw: dict, tmp_path) -> None:
+    pytest.importorskip("moviepy", reason="the video extra (pip install -e '.[video]')")
+    from gymnasium.wrappers import RecordVideo
+
+    env = RecordVideo(make(kw, render_mode="rgb_array", render_size=128), str(tmp_path),
+                      episode_trigger=lambda i: True, disable_logger=True)  # fmt: skip
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(2, np.float32))
+    env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 1000

@@ -330,7 +330,7 @@ def test_cli_replay_of_a_trace_and_an_episode(
     assert cli.main(["replay", str(trace), "--rrd", str(out), "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed == {"file": str(trace), "kind": "cnt_env.trace", "rrd": str(out),
-                       "recording_id": "run-coil-s3"}  # fmt: skip
+                       "recording_id": "run-coil-s3", "video": None}  # fmt: skip
     got = replay.read_rrd(out)
     assert got["recordings"] == ["run-coil-s3"]
     assert set(got["timelines"]) == {"step", "sim_time", "trace_node"}
@@ -352,6 +352,26 @@ def test_cli_replay_of_a_trace_and_an_episode(
     assert cli.main(["replay", str(foreign), "--rrd", str(tmp_path / "f.rrd")]) == 2
     assert "neither" in capsys.readouterr().err
     assert cli.main(["replay", str(tmp_path / "nope.npz"), "--rrd", str(out)]) == 2
+
+
+def test_cli_replay_writes_a_video_of_a_trace_and_an_episode(
+    kw: dict, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("imageio", reason="the video extra (pip install -e '.[video]')")
+    trace = _synthetic_trace(tmp_path / "trace.npz")
+    gif = tmp_path / "trace.gif"
+    assert cli.main(["replay", str(trace), "--video", str(gif)]) == 0
+    assert gif.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+    env = EpisodeSaver(make(kw), tmp_path / "ep", tag="video")
+    run_episode(env)
+    mp4 = tmp_path / "episode.mp4"
+    assert cli.main(["replay", str(env.paths[0]), "--video", str(mp4)]) == 0
+    assert mp4.stat().st_size > 1000 and b"ftyp" in mp4.read_bytes()[:64]
+    capsys.readouterr()
+    assert cli.main(["replay", str(trace)]) == 2  # neither --rrd nor --video
+    assert cli.main(["replay", str(trace), "--video", str(tmp_path / "x.avi")]) == 2
+    assert ".gif, .mp4" in capsys.readouterr().err
+    assert not (tmp_path / "x.avi").exists()
 
 
 def test_cli_run_records_the_run(rr, tmp_path: Path) -> None:

@@ -237,7 +237,10 @@ def test_held_out_routes_are_fixed_and_never_sampled() -> None:
 
     assert "u_turn" in routes.HELD_OUT
     u = routes.held_out("u_turn")
-    assert u.length == pytest.approx(160.0) and u.width == 15.0  # 60 + 40 + 60
+    # designed at w = 15: 60 + 40 + 60 L_vb, scaled with the band (routes.ROUTE_SCALE)
+    k = routes.ROUTE_SCALE
+    assert u.width == pytest.approx(routes.DEFAULT_HALF_WIDTH) == pytest.approx(15.0 * k)
+    assert u.length == pytest.approx(160.0 * k)
     rng = np.random.default_rng(0)
     names = {routes.sample(rng).name for _ in range(200)}
     assert names == set(routes.FAMILIES) and not names & set(routes.HELD_OUT)

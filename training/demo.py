@@ -38,11 +38,12 @@ TRAIN_SHARE = 0.25
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="cnt-demo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="cnt-demo", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
     p.add_argument("--budget-minutes", type=float, default=10.0)
     p.add_argument("--targets", default="jog,s_curve,hairpin")
     p.add_argument("--seeds", default="0,1,2")
-    p.add_argument("--out", type=Path, default=Path("demo_out"))
+    p.add_argument("--out", type=Path, default=Path("runs/demo"), help="output folder")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--no-train", action="store_true", help="skip the short training run")
     p.add_argument("--no-rrd", action="store_true", help="skip the rerun recordings")

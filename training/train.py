@@ -276,20 +276,23 @@ def _write_learning_curve(run: Path) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0])
-    p.add_argument("--algo", choices=("ppo", "sac"), required=True)
+    p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+    p.add_argument("--algo", choices=("ppo", "sac"), required=True, help="algorithm")
     p.add_argument("--config", type=Path, default=None,
                    help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the model and the envs")
     p.add_argument("--n-timesteps", type=int, default=None, help="override n_timesteps")
     p.add_argument("--n-envs", type=int, default=None, help="override n_envs")
-    p.add_argument("--max-episode-steps", type=int, default=None)
+    p.add_argument("--max-episode-steps", type=int, default=None,
+                   help="override the config's TimeLimit cap")  # fmt: skip
     p.add_argument("--max-wall-seconds", type=float, default=None,
                    help="stop training after this wall time")  # fmt: skip
-    p.add_argument("--vec-env", choices=("subproc", "dummy"), default=None)
+    p.add_argument("--vec-env", choices=("subproc", "dummy"), default=None,
+                   help="vector env (None: the config's, else subproc)")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("runs"), help="parent of the run directory")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("-v", "--verbose", type=int, default=0)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity")
     return p
 
 

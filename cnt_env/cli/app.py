@@ -45,41 +45,63 @@ __all__ = ["build_parser", "main"]
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    """A saved trace or episode as a rerun recording (the kind from its ``format``)."""
+    """A saved trace or episode as a rerun recording and/or a video (the kind from its
+    ``format``)."""
     from cnt_env import replay
     from cnt_env.io import TRACE_FORMAT
 
+    if args.rrd is None and args.video is None:
+        raise CliError("give --rrd OUT.rrd, --video OUT.mp4 (or .gif), or both")
     outputs = OutputSet()
-    rrd = outputs.check(args.rrd, "--rrd")
-    outputs.check(f"{rrd}.json", "--rrd")
-    require_rerun()
+    rrd = video = None
+    if args.rrd is not None:
+        rrd = outputs.check(args.rrd, "--rrd")
+        outputs.check(f"{rrd}.json", "--rrd")
+        require_rerun()
+    if args.video is not None:
+        video = outputs.check(args.video, "--video")
+        if video.suffix.lower() not in replay.VIDEO_FORMATS:
+            raise CliError(f"--video {video}: the name must end in one of "
+                           f"{', '.join(replay.VIDEO_FORMATS)}")  # fmt: skip
+        try:
+            replay.import_imageio()
+        except ImportError as exc:
+            raise CliError(f"--video: {exc}", EXIT_FAILED) from exc
     try:
         kind = replay.file_format(args.file)
     except replay.EpisodeFileError as exc:
         raise CliError(str(exc)) from exc
+    if kind not in (replay.EPISODE_FORMAT, TRACE_FORMAT):
+        raise CliError(
+            f"{args.file} is neither a cnt_env trace (`cnt-sim run --out`) nor a "
+            f"cnt_env episode file (format {str(kind)[:80]!r})"
+        )
+    rid = None
     try:
         with outputs:
-            tmp = outputs.add(rrd, "--rrd", checked=True)
-            if kind == replay.EPISODE_FORMAT:
-                rid = replay.record_episode(args.file, tmp, recording_id=args.recording_id)
-            elif kind == TRACE_FORMAT:
-                saved = load_trace(args.file)
-                rid = replay.record_simulation(saved, tmp, recording_id=args.recording_id)
-            else:
-                raise CliError(
-                    f"{args.file} is neither a cnt_env trace (`cnt-sim run --out`) nor a "
-                    f"cnt_env episode file (format {str(kind)[:80]!r})"
-                )
+            source = args.file if kind == replay.EPISODE_FORMAT else load_trace(args.file)
+            if rrd is not None:
+                tmp = outputs.add(rrd, "--rrd", checked=True)
+                if kind == replay.EPISODE_FORMAT:
+                    rid = replay.record_episode(source, tmp, recording_id=args.recording_id)
+                else:
+                    rid = replay.record_simulation(source, tmp, recording_id=args.recording_id)
+            if video is not None:
+                replay.write_video(source, outputs.add(video, "--video", checked=True))
     except (TraceFileError, replay.EpisodeFileError) as exc:
         raise CliError(str(exc)) from exc
     except OSError as exc:
-        raise CliError(f"cannot write {rrd}: {exc}", EXIT_FAILED) from exc
-    result = {"file": str(args.file), "kind": kind, "rrd": str(rrd), "recording_id": rid}
+        raise CliError(f"cannot write {rrd or video}: {exc}", EXIT_FAILED) from exc
+    result = {"file": str(args.file), "kind": kind, "rrd": None if rrd is None else str(rrd),
+              "recording_id": rid, "video": None if video is None else str(video)}  # fmt: skip
     if args.json:
         print_json(result)
     else:
-        print(f"wrote {rrd} (recording {rid}, from the {kind} file {args.file}); "
-              f"open it with `rerun {rrd}`")  # fmt: skip
+        if rrd is not None:
+            print(f"wrote {rrd} (recording {rid}, from the {kind} file {args.file}); "
+                  f"open it with `rerun {rrd}`")  # fmt: skip
+        if video is not None:
+            print(f"wrote {video} (from the {kind} file {args.file})")
     return EXIT_OK
 
 
@@ -130,14 +152,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     replay = sub.add_parser(
         "replay",
-        help="turn a saved trace or episode into a rerun recording",
+        help="turn a saved trace or episode into a rerun recording or a video",
         allow_abbrev=False,
-        description="Write a rerun recording (.rrd) of a trace saved by `cnt-sim run --out` "
-        "or of an episode saved by cnt_env.replay.save_episode; open it with `rerun FILE.rrd`. "
-        'Needs the rerun extra: pip install -e ".[rerun]".',
+        description="Write a rerun recording (.rrd) and/or a video (.mp4 or .gif) of a trace "
+        "saved by `cnt-sim run --out` or of an episode saved by cnt_env.replay.save_episode; "
+        'open a recording with `rerun FILE.rrd`. Needs the rerun extra (pip install -e ".[rerun]") '
+        'for --rrd and the video extra (pip install -e ".[video]") for --video.',
     )
     replay.add_argument("file", help="trace.npz or episode.npz (told apart by their format)")
-    replay.add_argument("--rrd", required=True, metavar="OUT.rrd", help="recording to write")
+    replay.add_argument("--rrd", metavar="OUT.rrd", help="recording to write")
+    replay.add_argument("--video", metavar="OUT.mp4", help="video to write (.mp4 or .gif)")
     replay.add_argument("--recording-id", default=None, help="default: the file's own")
     replay.add_argument(
         "--json", action="store_true", help="print one JSON object on stdout and nothing else"

@@ -34,6 +34,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from cnt_env.io import package_version, to_jsonable
+from cnt_env.presets import MODEL
 from cnt_env.runs import CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
 
 PROG = "cnt-sim"
@@ -159,8 +160,8 @@ def add_group_arguments(g: Any) -> None:
     g.add_argument(
         "--delta",
         type=float,
-        help="discretisation length delta / L_vb (default: the preset's validated mesh, "
-        "coil 0.125 graded to 1, serpentine 1)",
+        help="discretisation length delta / L_vb (default: the preset's mesh, presets.MESH: "
+        "delta = 1 on both presets)",
     )
     g.add_argument(
         "--dt",
@@ -171,12 +172,18 @@ def add_group_arguments(g: Any) -> None:
 
 def add_model_arguments(m: Any) -> None:
     """The model and solver flags shared by ``run`` and ``sweep`` (see runs.resolve)."""
-    m.add_argument("--drag-law", choices=DRAG_LAWS, default="linear")
+    m.add_argument(
+        "--drag-law",
+        choices=DRAG_LAWS,
+        default=MODEL["drag_law"],
+        help=f"drag law (default: {MODEL['drag_law']}, the paper's eq. 2 as printed)",
+    )
     m.add_argument(
         "--sliding",
         choices=SLIDING_OPTIONS,
-        default="B",
-        help="stepped substrate: B fixed in x, C free in x until snapped",
+        default=MODEL["sliding"],
+        help="stepped substrate: B fixed in x, C free in x until snapped, none fixed in x "
+        f"and z (default: {MODEL['sliding']})",
     )
     m.add_argument(
         "--coarse-delta",

@@ -101,7 +101,14 @@ from cnt_env.replay.simulation import (
     record_simulation,
 )
 from cnt_env.replay.still import render_top_view
-from cnt_env.replay.video import VIDEO_INSTALL_HINT, episode_frames, trace_frames, write_video
+from cnt_env.replay.video import (
+    VIDEO_FORMATS,
+    VIDEO_INSTALL_HINT,
+    episode_frames,
+    import_imageio,
+    trace_frames,
+    write_video,
+)
 from cnt_env.replay.wrappers import (
     EpisodeBuffer,
     EpisodeSaver,
@@ -118,6 +125,7 @@ __all__ = [
     "MODES",
     "RUN_FRAMES",
     "SAVED_RUN_FRAMES",
+    "VIDEO_FORMATS",
     "VIDEO_INSTALL_HINT",
     "Episode",
     "EpisodeBuffer",
@@ -130,6 +138,7 @@ __all__ = [
     "episode_frames",
     "episode_recording_id",
     "file_format",
+    "import_imageio",
     "import_rerun",
     "load_episode",
     "read_rrd",

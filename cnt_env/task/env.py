@@ -20,6 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from cnt_env import MAX_EPISODE_STEPS
+from cnt_env.presets import MODEL
 from cnt_env.sim.deposition import DepositionSim
 from cnt_env.sim.forces import DRAG_LAWS
 from cnt_env.sim.stepper import SimulationError
@@ -50,12 +51,12 @@ __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 #: Default speed cap of the flow, in units of e_v / (mu H) (the paper's range, docs/model.md §6).
 DEFAULT_VBAR_MAX = 0.13
 #: The default control interval is this many Hbar (time units tau), rounded to whole
-#: physics steps, per score mode. The deposition speed is ~0.68 L_vb / Hbar. "thin" (v0):
-#: ~1 L_vb of trace. "corridor": ~8 L_vb, the median trace laid before the suspended rod
-#: leans the new way after a switch of the flow direction (8.0 at H̄/2, 8.5 at 8 L_vb;
+#: physics steps, per score mode. The deposition speed is ~0.80 L_vb / Hbar. "thin" (v0):
+#: ~1.2 L_vb of trace. "corridor": ~24 L_vb, the median trace laid before the suspended
+#: rod leans the new way after a switch of the flow direction (23 at H̄/2, 27 at 8 L_vb;
 #: benchmarks/results/step_response.json), so the agent never acts faster than the rod
-#: can follow; the pattern's drift follows in a median 12 L_vb.
-CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 12.0}
+#: can follow; the pattern's drift follows in a median 34 L_vb.
+CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 30.0}
 #: Trace window (L_vb) the K trace points of the observation span in the route task:
 #: about the 60 L_vb whose mean is the pattern's centre.
 ROUTE_TRACE_WINDOW = 64.0
@@ -68,6 +69,8 @@ DEFAULT_MAX_EPISODE_STEPS = MAX_EPISODE_STEPS
 #: Most physics steps one control step may take.
 MAX_SUBSTEPS = 100_000
 OBS_MODES = ("vector", "image")
+#: How render() draws (the env's ``render_style``).
+RENDER_STYLES = ("figure", "raster")
 _REWARD_KEYS = {
     "thin": ("reward_coverage", "reward_precision", "reward_progress", "reward_failure"),
     "corridor": (*(f"reward_{t}" for t in ROUTE_TERMS), "reward_failure"),
@@ -106,10 +109,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     :func:`cnt_env.task.spaces.action_from_flow`). Out-of-range actions are clipped (past a
     bound acts exactly like the bound); a NaN or infinite action raises ``ValueError`` and
     leaves the env untouched. The flow is held for ``control_interval`` (tau), simulated
-    as ``n_substeps`` physics steps of ``dt``. Default: 12 H̄ (~8 L_vb of trace) for
+    as ``n_substeps`` physics steps of ``dt``. Default: 30 H̄ (~24 L_vb of trace) for
     routes, the median trace laid before the suspended rod leans the new way after a
-    switch of direction (step response: 8-8.5 L_vb; the pattern's drift follows in a
-    median 12); 1.5 H̄ (~1 L_vb) for ``score="thin"``.
+    switch of direction (step response: 23-27 L_vb; the pattern's drift follows in a
+    median 34); 1.5 H̄ (~1.2 L_vb) for ``score="thin"``.
 
     ## Observation Space
 
@@ -205,7 +208,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `dt`               | 0.2 H̄ ...    | physics time step (tau); ENV_SIM_DEFAULTS       |
     | `coarse_delta`     | None         | graded discretisation (DepositionConfig)        |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
-    | `drag_law`         | "linear"     | "linear" or "printed"                           |
+    | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
     | `control_interval` | 12 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
@@ -213,7 +216,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
     | `reset_advance`    | 4.0          | max random advance at reset (control intervals) |
     | `score`            | "corridor"   | "corridor" (routes) or "thin" (v0 polylines)    |
-    | `route_width`      | 15.0         | corridor half-width of bare polylines (L_vb)    |
+    | `route_width`      | 18.5         | corridor half-width of bare polylines (L_vb)    |
     | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]      |
     | `families`         | all          | training families (routes.FAMILIES / targets)   |
     | `trace_window`     | 64 / None    | span of the observed trace points (L_vb)        |
@@ -228,7 +231,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `obs_mode`         | "vector"     | "vector" or "image"                             |
     | `image_size`       | 64           | S of the image observation (>= 64 pixels)       |
     | `image_extent`     | 64.0         | side of the image observation (L_vb)            |
-    | `render_size`      | 256          | side of the rendered frame (pixels)             |
+    | `render_size`      | 512          | side of the rendered frame (pixels)             |
+    | `render_style`     | "figure"     | "figure": fixed extent per episode, legend,     |
+    |                    |              | scale bar (L_vb, µm), matplotlib; "raster":     |
+    |                    |              | numpy lines, fitted each frame, ~10x faster     |
     | `pattern_every`    | 50           | steps between pattern measures (0: at the end)  |
     | `cache_dir`        | None         | warm-state cache directory                      |
 
@@ -236,7 +242,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     * v0, revision 2 (route task): ``score="corridor"`` by default: circuit routes with a
       corridor, pads and keep-outs (docs/task.md), the corridor score, per-route
-      ``max_episode_steps`` and termination on completion, a control interval of 12 H̄
+      ``max_episode_steps`` and termination on completion, a control interval of 30 H̄
       from the measured step response, the trace observed over its last 64 L_vb, the
       corridor width observed. ``score="thin"`` is the v0 task unchanged.
     * v0: initial version (thin polylines, ~1 L_vb per step).
@@ -260,7 +266,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         dt: float | None = None,
         coarse_delta: float | None = None,
         initial_radius: float | None = None,
-        drag_law: str = "linear",
+        drag_law: str = MODEL["drag_law"],
         sim_options: Mapping[str, Any] | None = None,
         vbar_max: float = DEFAULT_VBAR_MAX,
         control_interval: float | None = None,
@@ -283,7 +289,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         obs_mode: str = "vector",
         image_size: int = 64,
         image_extent: float = 64.0,
-        render_size: int = 256,
+        render_size: int = 512,
+        render_style: str = "figure",
         pattern_every: int = 50,
         cache_dir: str | None = None,
     ) -> None:
@@ -337,6 +344,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.image_size = s.count("image_size", image_size, minimum=64)
         self.image_extent = s.positive("image_extent", image_extent)
         self.render_size = s.count("render_size", render_size, minimum=16)
+        self.render_style = s.choice("render_style", render_style, RENDER_STYLES)
+        self._renderer: Any = None  # plotting.TopViewRenderer of the episode (figure style)
         self.pattern_every = s.count("pattern_every", pattern_every, minimum=0)
         self.cache_dir = s.optional_path("cache_dir", cache_dir)
         self.lean_heights = LEAN_HEIGHTS + tuple(f * self.params.Hbar
@@ -472,6 +481,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._target_s = targets_mod.cumulative_length(self._target_abs)
         self._target_length = float(self._target_s[-1])
         self._steps = 0
+        self._renderer = None  # a new episode: a new fixed extent
         self._failure: str | None = None
 
     # ---- step -------------------------------------------------------------------------
@@ -613,12 +623,17 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         return raster.path_head(self._target_abs, self._target_s, s) if s > 0 else None
 
     def render(self) -> np.ndarray | None:
-        """Top view (uint8 (H, W, 3); :func:`cnt_env.task.raster.top_view`)."""
+        """Top view (uint8 (H, W, 3)): ``render_style`` "figure" (the default;
+        :class:`cnt_env.plotting.TopViewRenderer`: the extent fixed at the episode's first
+        frame, a legend, a scale bar in L_vb and µm, the flow arrow) or "raster"
+        (:func:`cnt_env.task.raster.top_view`, refitted to every frame)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode=...")
             return None
         if self._sim is None:
             frame = np.full((self.render_size, self.render_size, 3), 255, dtype=np.uint8)
+        elif self.render_style == "figure":
+            frame = self._figure_frame()
         else:
             frame = raster.top_view(
                 self.render_size, self._sim.trace()[:, [0, 2]], self._n0, self._target_abs,
@@ -629,6 +644,34 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             return frame
         self._window.show(frame)
         return None
+
+    def _figure_frame(self) -> np.ndarray:
+        from cnt_env import plotting  # matplotlib, only when rendering
+
+        sim = self._sim
+        trace = sim.trace()
+        rod = sim.suspended_nodes
+        width = getattr(self.target, "width", None)
+        if self._renderer is None:
+            sets = [self._target_abs, trace[max(0, self._n0 - 50) :], rod]
+            if width:
+                sets += [self._target_abs + d for d in ((width, width), (-width, -width))]
+            sets += [*self._pads_abs, *self._keepouts_abs]
+            extent = plotting.top_view_extent(*sets, margin=0.12)
+            self._renderer = plotting.TopViewRenderer(
+                extent, (self.render_size, self.render_size), target=self._target_abs,
+                n_start=self._n0, corridor=width, pads=tuple(self._pads_abs),
+                keepouts=tuple(self._keepouts_abs), rod=rod, flow=(0.0, 0.0),
+                target_done=np.zeros((0, 2)),
+                flow_scale=plotting.flow_arrow_scale(self.params.Hbar, self.vbar_max),
+                um_per_lvb=plotting.lvb_in_um(self.substrate),
+            )  # fmt: skip
+        vbar, phi = self._flow
+        done = self._target_done(self._last_metrics)
+        score = float(np.sum(self._potentials))
+        title = f"{self.target.name}: step {self._steps}, score {score:.2f}"
+        return self._renderer.render(trace, rod, (vbar * math.cos(phi), vbar * math.sin(phi)),
+                                     np.zeros((0, 2)) if done is None else done, title)  # fmt: skip
 
     def _route_overlays(self) -> raster.Extra:
         """Pads (dark yellow) and keep-outs (orange, closed) for the rendered frame."""

@@ -8,9 +8,10 @@ it, optional ``pads`` (segments the trace must cross, like electrodes) and optio
 
 The corridor's default half-width, :data:`DEFAULT_HALF_WIDTH`, comes from the measured
 band widths (``benchmarks/results/step_response.json``): a constant flow across the steps
-lays a serpentine band 27 L_vb peak-to-peak at v̄ = 0.13, 33 at 0.1 and 41 at 0.065; along
-the steps an almost straight run. A corridor of half-width 15 holds the narrowest band
-(v̄ = v̄_max) with a little room to steer.
+lays a serpentine band 34 L_vb peak-to-peak at v̄ = 0.13, 37 at 0.1 and 51 at 0.065; along
+the steps an almost straight run. A corridor of half-width 18.5 holds the narrowest band
+(v̄ = v̄_max) with a little room to steer. Route lengths scale with it
+(:data:`ROUTE_SCALE`).
 
 Families (drawn by :func:`sample` with the env's ``np_random`` and a ``difficulty`` in
 [0, 1] that lengthens the route, adds turns and narrows the corridor; ranges below):
@@ -70,9 +71,13 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Default corridor half-width w (L_vb): the narrowest measured band (27 L_vb peak to peak
-#: at v̄ = 0.13, benchmarks/results/step_response.json) fits with ~1.5 L_vb to spare.
-DEFAULT_HALF_WIDTH = 15.0
+#: Default corridor half-width w (L_vb): the narrowest measured band (33.9 L_vb peak to
+#: peak at v̄ = 0.13, benchmarks/results/step_response.json) fits with ~1.5 L_vb to spare.
+DEFAULT_HALF_WIDTH = 18.5
+#: Every length of the families and held-out routes below was designed for a band that
+#: fits w = 15 (27 L_vb peak to peak, the first model's); they scale with the band, so
+#: that the routes keep their shape relative to what the process draws.
+ROUTE_SCALE = DEFAULT_HALF_WIDTH / 15.0
 #: Narrowest corridor accepted (L_vb): below it no flow lays a band that fits.
 MIN_HALF_WIDTH = 1.0
 #: Shortest route accepted (L_vb): one discretisation length of trace.
@@ -81,13 +86,13 @@ MIN_ROUTE_LENGTH = 1.0
 DEFAULT_DIFFICULTY = 0.5
 
 
-#: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.027 L_vb per 1.5 Hbar step in
+#: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.20 L_vb per 1.5 Hbar step in
 #: benchmarks/results/step_response.json).
-DEPOSITION_SPEED = 0.68
+DEPOSITION_SPEED = 0.80
 #: Progress of the pattern along a route per L_vb of trace at the slowest useful flow
-#: (the serpentine across the steps at v̄ = 0.13 drifts 0.21; along the steps 0.34-0.58;
-#: benchmarks/results/step_response.json): it sets the per-route episode length.
-PROGRESS_RATE = 0.2
+#: (the serpentine across the steps at v̄ = 0.13 drifts 0.16-0.19; along the steps
+#: 0.6-1.0; benchmarks/results/step_response.json): it sets the per-route episode length.
+PROGRESS_RATE = 0.17
 #: Route episodes last ROUTE_STEPS_SLACK times the steps the measured rate needs, plus
 #: ROUTE_STEPS_MARGIN (the pattern's response to the first turn).
 ROUTE_STEPS_SLACK = 1.5
@@ -194,13 +199,13 @@ def _lerp(lo: float, hi: float, t: float) -> float:
 
 
 def _width(rng: np.random.Generator, d: float) -> float:
-    """Corridor half-width: 20 at difficulty 0 down to 13 at 1, +-1."""
-    return float(_lerp(20.0, 13.0, d) + rng.uniform(-1.0, 1.0))
+    """Corridor half-width: 20 at difficulty 0 down to 13 at 1, +-1 (x ROUTE_SCALE)."""
+    return ROUTE_SCALE * float(_lerp(20.0, 13.0, d) + rng.uniform(-1.0, 1.0))
 
 
 def _length(rng: np.random.Generator, d: float, lo: float = 40.0, hi: float = 160.0) -> float:
-    """Route length: ~lo at difficulty 0 up to ~hi at 1, +-15%."""
-    return float(_lerp(lo, hi, d) * rng.uniform(0.85, 1.15))
+    """Route length: ~lo at difficulty 0 up to ~hi at 1, +-15% (x ROUTE_SCALE)."""
+    return ROUTE_SCALE * float(_lerp(lo, hi, d) * rng.uniform(0.85, 1.15))
 
 
 def _axis_heading(rng: np.random.Generator) -> float:
@@ -237,7 +242,7 @@ def _u_route(rng: np.random.Generator, d: float) -> Route:
 
 def _staircase(rng: np.random.Generator, d: float) -> Route:
     n_steps = round(_lerp(2, 5, d)) + int(rng.integers(0, 2))
-    step = float(rng.uniform(20.0, 35.0))
+    step = ROUTE_SCALE * float(rng.uniform(20.0, 35.0))
     h, t = _axis_heading(rng), _turn(rng)
     headings = [h if i % 2 == 0 else h + t for i in range(n_steps)]
     p = {"n_legs": n_steps, "leg": step, "heading": h, "turn": t}
@@ -248,7 +253,7 @@ def _staircase(rng: np.random.Generator, d: float) -> Route:
 def _detour(rng: np.random.Generator, d: float) -> Route:
     """Around a keep-out block in the way of the straight run (canonical frame: +x)."""
     w = _width(rng, d)
-    block = float(rng.uniform(15.0, 30.0))  # side of the keep-out along x
+    block = ROUTE_SCALE * float(rng.uniform(15.0, 30.0))  # side of the keep-out along x
     off = float(rng.uniform(2.0, 2.6) * w)  # how far the route jogs sideways
     lead = _length(rng, d, 25.0, 45.0)
     side = 1.0 if rng.integers(2) else -1.0
@@ -295,7 +300,7 @@ def _band(rng: np.random.Generator, d: float) -> Route:
     """A band for the serpentine to fill: a run across the steps (±x), wide corridor."""
     p = {"length": _length(rng, d, 40.0, 120.0),
          "heading": 0.0 if rng.integers(2) else math.pi}  # fmt: skip
-    w = float(rng.uniform(15.0, 20.0))
+    w = ROUTE_SCALE * float(rng.uniform(15.0, 20.0))
     return Route(targets_mod.straight_points(**p), w, name="band", params=p)
 
 
@@ -339,9 +344,11 @@ def sample(rng: np.random.Generator, families: Sequence[str] | None = None,
 
 
 def _held_out_specs() -> dict[str, dict[str, Any]]:
+    """The held-out routes, designed at w = 15 and scaled by ROUTE_SCALE (lengths and
+    widths alike)."""
     u = [[0, 0], [60, 0], [60, 40], [0, 40]]
-    return {
-        # the U-turn of issue 10 (0,0)-(60,0)-(60,40)-(0,40): 160 L_vb, w = 15
+    base = {
+        # the U-turn of issue 10 (0,0)-(60,0)-(60,40)-(0,40): 160 L_vb at w = 15
         "u_turn": {"waypoints": u, "width": 15.0},
         "l_up": {"waypoints": [[0, 0], [50, 0], [50, 60]], "width": 15.0},
         "against_flow": {"waypoints": [[0, 0], [-90, 0]], "width": 15.0},
@@ -363,6 +370,15 @@ def _held_out_specs() -> dict[str, dict[str, Any]]:
         },
         "band_fill": {"waypoints": [[0, 0], [100, 0]], "width": 18.0},
     }
+
+    def scaled(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {k: scaled(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [scaled(v) for v in value]
+        return ROUTE_SCALE * float(value)
+
+    return {name: scaled(spec) for name, spec in base.items()}
 
 
 #: Names of the held-out routes (evaluation only).
