@@ -396,3 +396,28 @@ def test_exit_code_table_is_documented() -> None:
     text = (REPO / "docs" / "cli.md").read_text()
     for code in cli.EXIT_CODES:
         assert f"| {code} " in text
+
+
+def test_run_config_file_round_trips_and_flags_win(tmp_path: Path) -> None:
+    first = tmp_path / "a.npz"
+    argv = ["run", "--preset", "serpentine", "--vbar", "0.05", "--seed", "3", *TINY]
+    assert _call([*argv, "--out", str(first)])[0] == 0
+    again = tmp_path / "b.npz"  # the <out>.json of the first run as the config
+    assert _call(["run", "--config", f"{first}.json", "--out", str(again)])[0] == 0
+    a, b = load_trace(first), load_trace(again)
+    np.testing.assert_array_equal(a["trace"], b["trace"])
+    assert a["config"] == b["config"] and a["params"] == b["params"]
+    flat = tmp_path / "c.yaml"  # flag names as keys; a flag on the command line wins
+    flat.write_text("preset: serpentine\nvbar: 0.05\nseed: 3\ndeposit: 5\nHbar: 40\n"
+                    "transient: 0\ndelta: 1\n")  # fmt: skip
+    third = tmp_path / "c.npz"
+    assert _call(["run", "--config", str(flat), "--seed", "4", "--out", str(third)])[0] == 0
+    c = load_trace(third)
+    assert c["config"]["seed"] == 4 and c["params"] == a["params"]
+    assert not np.array_equal(c["trace"], a["trace"])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("vbarr: 0.05\n")
+    code, _, err = _call(["run", "--config", str(bad)])
+    assert code == 2 and "vbarr" in err and "unknown settings" in err
+    code, _, err = _call(["run", "--config", str(tmp_path / "missing.yaml")])
+    assert code == 2 and "cannot read" in err

@@ -18,8 +18,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from cnt_env import units
 from cnt_env.cli import sweep as sweep_cli
@@ -36,7 +37,7 @@ from cnt_env.cli.common import (
     print_json,
     require_rerun,
 )
-from cnt_env.cli.run import add_run_arguments, cmd_measure, cmd_run
+from cnt_env.cli.run import add_run_arguments, cmd_measure, cmd_run, load_run_config
 from cnt_env.io import OutputError, OutputSet, TraceFileError, load_trace
 from cnt_env.presets import DEMO_DEPOSIT
 from cnt_env.runs import RunInputError, RunLimitError
@@ -114,7 +115,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return main(run_argv)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(run_defaults: Mapping[str, Any] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
         description="Carbon-nanotube deposition simulator (discrete elastic rods).",
@@ -129,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run one deposition and measure its trace.",
     )
     add_run_arguments(run)
-    run.set_defaults(func=cmd_run)
+    run.set_defaults(func=cmd_run, **dict(run_defaults or {}))
 
     measure = sub.add_parser(
         "measure",
@@ -196,6 +197,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, usage errors
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    if getattr(args, "config", None):  # cnt-sim run --config: the file's values, then flags
+        try:
+            parser = build_parser(load_run_config(args.config))
+            args = parser.parse_args(argv)
+        except CliError as exc:
+            return _error(str(exc), exc.code)
+        except SystemExit as exc:
+            return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     args.argv = argv
     from cnt_env.sim.stepper import SimulationError
     from cnt_env.sweep import SweepFailure

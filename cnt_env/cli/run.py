@@ -58,6 +58,11 @@ def run_options(args: argparse.Namespace) -> runs.RunOptions:
     )
 
 
+def _flag_hint(message: str) -> str:
+    """A measurement message with its Python option names replaced by the CLI flag."""
+    return message.replace("MeasureOptions.transient_length", "--transient")
+
+
 def argv_of(args: argparse.Namespace) -> list[str]:
     return list(getattr(args, "argv", None) or [])
 
@@ -153,7 +158,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> int:
         raise CliError(str(exc), EXIT_FAILED) from exc
     measurement = result.measurement
     if measurement.get("error"):
-        warn(f"trace not measured: {measurement['error']}")
+        warn(f"trace not measured: {_flag_hint(measurement['error'])}")
 
     report = result.report()
     params, config = report["params"], report["config"]
@@ -235,13 +240,71 @@ def _measure(args: argparse.Namespace, outputs: OutputSet) -> int:
         print(f"{args.trace}:")
         print(format_summary(result, written))
     if measurement.get("error"):
-        print(f"{PROG}: error: trace not measured: {measurement['error']}", file=sys.stderr)
+        print(f"{PROG}: error: trace not measured: {_flag_hint(measurement['error'])}",
+              file=sys.stderr)  # fmt: skip
         return EXIT_FAILED
     return EXIT_OK
 
 
+#: Keys of a ``cnt-sim run --config`` file -> the flag (argparse dest) they set. The
+#: ``config`` and ``params`` sections of the ``<out>.json`` a run writes use the names on
+#: the left too, so that file round-trips.
+CONFIG_KEYS: dict[str, str] = {
+    "preset": "preset", "substrate": "substrate", "seed": "seed", "dt": "dt",
+    "deposit": "deposit", "deposit_length": "deposit",
+    "transient": "transient", "transient_length": "transient",
+    "drag_law": "drag_law", "sliding": "sliding", "coarse_delta": "coarse_delta",
+    "fine_length": "fine_length", "contact_mode": "contact_mode",
+    "initial_radius": "initial_radius", "max_nodes": "max_nodes", "max_steps": "max_steps",
+    "max_wall_time": "max_wall_time",
+    **{dest: dest for dest in runs.GROUP_FIELDS},
+    **{field: dest for dest, field in runs.GROUP_FIELDS.items()},
+    **{dest: dest for dest in runs.SI_FIELDS},
+}  # fmt: skip
+
+
+def load_run_config(path: str) -> dict[str, Any]:
+    """The flag values (argparse dests) of a ``--config`` file: YAML or JSON, either a
+    flat mapping of :data:`CONFIG_KEYS` (dashes or underscores) or the ``<out>.json`` a
+    run writes (its ``config`` and ``params`` sections; the other keys are ignored)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise CliError(f"--config {path}: cannot read it as YAML or JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise CliError(f"--config {path}: expected a mapping of settings, got "
+                       f"{type(data).__name__}")  # fmt: skip
+    if isinstance(data.get("config"), dict):  # a run's <out>.json
+        saved, params = data["config"], data.get("params") or {}
+        flat = {k: v for k, v in saved.items() if k in CONFIG_KEYS}
+        if saved.get("dt_factor") is not None:  # dt came from the default factor, not --dt
+            flat.pop("dt", None)
+        si = saved.get("si")
+        if isinstance(si, dict):  # SI values given: they set the derived groups
+            fields = {f: d for d, f in runs.SI_FIELDS.items()}
+            flat.update({fields[k]: v for k, v in si.items() if k in fields})
+        for dest, field in runs.GROUP_FIELDS.items():
+            if field in params and not (isinstance(si, dict) and dest in runs.SI_DERIVED_GROUPS):
+                flat[dest] = params[field]
+    else:
+        flat = {str(k).replace("-", "_"): v for k, v in data.items()}
+        unknown = sorted(set(flat) - set(CONFIG_KEYS))
+        if unknown:
+            raise CliError(f"--config {path}: unknown settings {unknown}; use the names of "
+                           f"the run flags: {sorted(CONFIG_KEYS)}")  # fmt: skip
+    return {CONFIG_KEYS[k]: v for k, v in flat.items() if v is not None}
+
+
 def add_run_arguments(run: argparse.ArgumentParser) -> None:
     """The flags of ``cnt-sim run``."""
+    run.add_argument(
+        "--config",
+        metavar="FILE.yaml",
+        help="settings from a YAML or JSON file (flag names as keys, or the <out>.json of "
+        "an earlier run); flags given on the command line win",
+    )
     run.add_argument(
         "--preset",
         choices=units.PRESETS,
