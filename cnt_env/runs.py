@@ -368,6 +368,10 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
             radius = INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         if opts.extra_groups:
             params = dataclasses.replace(params, **opts.extra_groups)
+    except (ValueError, TypeError) as exc:
+        raise invalid(exc) from exc
+    check_group_range(params)  # before the config's node-count guard, to name the flag
+    try:
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,
             contact=ContactOptions(mode=opts.contact_mode), initial_radius=radius,
@@ -375,7 +379,6 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         )  # fmt: skip
     except (ValueError, TypeError) as exc:
         raise invalid(exc) from exc
-    check_group_range(params)
     n_nodes = estimated_nodes(sim_config, float(length))
     if n_nodes > opts.limits.max_nodes:
         raise RunInputError(
