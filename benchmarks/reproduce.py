@@ -187,7 +187,7 @@ DELTA_POINTS = [
     _pt("delta", SERP, delta_bar=0.125, coarse_delta=1.0),
 ]
 
-#: What the paper gives (physics.md §6): (row, key) -> (quantity, value, note)
+#: What the paper gives (docs/model.md §6): (row, key) -> (quantity, value, note)
 PAPER: list[tuple[str, dict[str, float], str, float, str]] = [
     ("coil", {}, "coil_radius", 7.64, "R0 = 7.64 (+-0.01)"),
     ("vbar", {"vbar": 0.037}, "amplitude", 30.0, "baseline A ~ 30 (26-33)"),

@@ -1,4 +1,4 @@
-"""Stepped-substrate options (physics.md §5): the substrate friction and snap penalty
+"""Stepped-substrate options (docs/model.md §5): the substrate friction and snap penalty
 (forces.add_substrate, finite-difference checked), the snap variants, and bad input."""
 
 from __future__ import annotations

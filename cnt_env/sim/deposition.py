@@ -33,14 +33,7 @@ from cnt_env.sim.forces import (
     vdw_pull,
 )
 from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
-from cnt_env.sim.substrate import (
-    SLIDING_OPTIONS,
-    SNAP_OPTIONS,
-    TAIL_CLAMP_OPTIONS,
-    FlatSticky,
-    Stepped,
-    Substrate,
-)
+from cnt_env.sim.substrate import FlatSticky, Stepped, Substrate, check_sliding_options
 from cnt_env.units import DimensionlessParams
 
 CONTACT_MODES = ("project", "event")
@@ -144,18 +137,9 @@ class DepositionConfig:
                 "coarsen delta_bar (or coarse_delta), lower Hbar, or raise max_nodes if "
                 "you have the memory and time"
             )
-        if self.sliding not in SLIDING_OPTIONS:
-            raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
-        if not (math.isfinite(self.friction) and self.friction >= 0):
-            raise ValueError(f"friction must be finite and >= 0, got {self.friction!r}")
-        if self.snap not in SNAP_OPTIONS:
-            raise ValueError(f"snap must be one of {SNAP_OPTIONS}, got {self.snap!r}")
-        if not (math.isfinite(self.snap_stiffness) and self.snap_stiffness > 0):
-            raise ValueError(f"snap_stiffness must be finite and > 0, got {self.snap_stiffness!r}")
-        if self.tail_clamp not in TAIL_CLAMP_OPTIONS:
-            raise ValueError(
-                f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {self.tail_clamp!r}"
-            )
+        check_sliding_options(
+            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp
+        )
         if not (self.tail_length > 4 * p.delta_bar):
             raise ValueError(f"tail_length must exceed 4 delta_bar, got {self.tail_length!r}")
         if self.coarse_delta is not None and not (

@@ -134,7 +134,7 @@ def add_substrate(
     ab: np.ndarray,
     jacobian: bool,
 ) -> None:
-    """Per-DOF substrate terms on deposited nodes (physics.md §5, [choice]; substrate.py):
+    """Per-DOF substrate terms on deposited nodes (docs/model.md §5, [choice]; substrate.py):
 
     * friction: F_k = -friction_k (q_k - q_old_k) / dt, a viscous resistance to sliding
       (friction_k = eta * Voronoi length, eta per unit length in units of mu);

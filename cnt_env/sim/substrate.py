@@ -27,6 +27,23 @@ SNAP_OPTIONS = ("jump", "constraint", "penalty")
 TAIL_CLAMP_OPTIONS = ("xyz", "xy")
 
 
+def check_sliding_options(
+    sliding: str, friction: float, snap: str, snap_stiffness: float, tail_clamp: str
+) -> None:
+    """Validate the stepped substrate's named options (raises ValueError naming the field);
+    shared by :class:`Stepped` and ``DepositionConfig``."""
+    if sliding not in SLIDING_OPTIONS:
+        raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {sliding!r}")
+    if not (math.isfinite(friction) and friction >= 0):
+        raise ValueError(f"friction must be finite and >= 0, got {friction!r}")
+    if snap not in SNAP_OPTIONS:
+        raise ValueError(f"snap must be one of {SNAP_OPTIONS}, got {snap!r}")
+    if not (math.isfinite(snap_stiffness) and snap_stiffness > 0):
+        raise ValueError(f"snap_stiffness must be finite and > 0, got {snap_stiffness!r}")
+    if tail_clamp not in TAIL_CLAMP_OPTIONS:
+        raise ValueError(f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {tail_clamp!r}")
+
+
 @dataclass(frozen=True)
 class FlatSticky:
     """Flat sticky substrate (static coils): a deposited node is fixed in x, y and z.
@@ -94,20 +111,11 @@ class Stepped:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.kappa_c) and self.kappa_c > 0):
             raise ValueError(f"kappa_c must be finite and > 0, got {self.kappa_c!r}")
-        if self.sliding not in SLIDING_OPTIONS:
-            raise ValueError(f"sliding must be one of {SLIDING_OPTIONS}, got {self.sliding!r}")
         if not (self.tail_length > 0):
             raise ValueError(f"tail_length must be > 0, got {self.tail_length!r}")
-        if not (math.isfinite(self.friction) and self.friction >= 0):
-            raise ValueError(f"friction must be finite and >= 0, got {self.friction!r}")
-        if self.snap not in SNAP_OPTIONS:
-            raise ValueError(f"snap must be one of {SNAP_OPTIONS}, got {self.snap!r}")
-        if not (math.isfinite(self.snap_stiffness) and self.snap_stiffness > 0):
-            raise ValueError(f"snap_stiffness must be finite and > 0, got {self.snap_stiffness!r}")
-        if self.tail_clamp not in TAIL_CLAMP_OPTIONS:
-            raise ValueError(
-                f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {self.tail_clamp!r}"
-            )
+        check_sliding_options(
+            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp
+        )
 
     def deposit(self, rod: Rod, node: int) -> None:
         i = 4 * node
