@@ -71,8 +71,11 @@ def _poison_zip(model: Path, marker: Path, keys: tuple[str, ...]) -> None:
             z.writestr(n, b)
 
 
-def _obs() -> np.ndarray:
-    obs = np.zeros(81, dtype=np.float32)
+def _obs(n: int | None = None) -> np.ndarray:
+    """A plausible observation for the pretrained ppo model (trace empty, route ahead)."""
+    if n is None:
+        n = load_policy(PRETRAINED_DIR / "ppo.zip").model.observation_space.shape[0]
+    obs = np.zeros(n, dtype=np.float32)
     obs[32:64] = np.column_stack([2.0 * np.arange(1, 17), np.zeros(16)]).ravel()
     return obs
 
@@ -162,8 +165,9 @@ def test_safe_load_acts_as_the_trusted_load() -> None:
     for name in ("ppo", "sac"):
         safe = load_policy(PRETRAINED_DIR / f"{name}.zip")
         trusted = load_policy(PRETRAINED_DIR / f"{name}.zip", trust=True)
+        n_obs = safe.model.observation_space.shape[0]
         for _ in range(5):
-            o = (3.0 * rng.normal(size=81)).astype(np.float32)
+            o = (3.0 * rng.normal(size=n_obs)).astype(np.float32)
             assert np.array_equal(safe.act(o), trusted.act(o))
 
 

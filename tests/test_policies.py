@@ -95,10 +95,18 @@ def test_offline_score_matches_the_env() -> None:
 @pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
 @pytest.mark.parametrize("name", ["ppo", "sac", "ppo_residual"])
 def test_pretrained_models_load_with_their_normalisation(name: str) -> None:
+    import gymnasium as gym
+
+    from training.common import env_settings, load_config
+
+    env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / f"{name}.yml"))
+    n_obs = gym.make("CNTDeposit-v0", **env_kwargs).observation_space.shape[0]
     pol = load_policy(PRETRAINED_DIR / f"{name}.zip")
-    assert pol.vecnormalize is not None and pol.vecnormalize.obs_rms.mean.shape == (81,)
+    # the statistics and the network fit the env the model's own config makes
+    assert pol.vecnormalize is not None and pol.vecnormalize.obs_rms.mean.shape == (n_obs,)
+    assert pol.model.observation_space.shape == (n_obs,)
     assert (pol.base is not None) == (name == "ppo_residual")
-    obs = np.zeros(81, dtype=np.float32)
+    obs = np.zeros(n_obs, dtype=np.float32)
     obs[32:64] = np.column_stack([2.0 * np.arange(1, 17), np.zeros(16)]).ravel()
     a = pol.act(obs)
     assert a.shape == (2,) and np.all(np.abs(a) <= 1.0)

@@ -72,8 +72,11 @@ ALL_POLICIES = ("random", "constant", "scripted", "ppo", "sac")
 #: name contains its algorithm (ppo.zip, sac.zip, ppo_residual.zip).
 BASELINES = ("random", "constant", "scripted")
 TERMS = ("score", "coverage", "precision", "progress", "mean_distance")
-#: Grid of the constant-flow search: speeds (e_v / (mu H)) and number of directions.
-CONSTANT_SPEEDS = (0.037, 0.08, 0.13)
+#: Grid of the constant-flow search: speeds (e_v / (mu H)) and number of directions. The
+#: paper's baseline speed and the three of the route task's step response (band 34-51
+#: L_vb peak to peak at 0.13-0.065, benchmarks/results/step_response.json), so that the
+#: oracle has every band width that could fit a corridor.
+CONSTANT_SPEEDS = (0.037, 0.065, 0.1, 0.13)
 CONSTANT_DIRECTIONS = 8
 #: Seeds of the constant-flow search, apart from the evaluation seeds.
 CONSTANT_SEARCH_SEEDS = (100,)
