@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.patterns import MeasureOptions, arc_length, measure
 from cnt_env.plotting.topview import lvb_in_um
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,8 +47,7 @@ def main() -> None:
     for rel, title in PANELS:
         trace = np.load(RESULTS / rel)
         m = measure(trace, MeasureOptions(transient_length=150.0), substrate="stepped")
-        seg = np.linalg.norm(np.diff(trace, axis=0), axis=1)
-        arc = np.concatenate([[0.0], np.cumsum(seg)])
+        arc = arc_length(trace)
         shown.append(trace[arc >= arc[-1] - args.window])
         labels.append(
             f"{title}\n{m['pattern']}\nA = {m['amplitude']:.1f}, λ_x = {m['wavelength']:.1f}"
