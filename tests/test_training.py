@@ -140,3 +140,58 @@ def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
     assert set(overall) == {"random", "scripted"}
     for r in overall.values():
         assert 0.0 <= r["score_mean"] <= 1.0
+
+
+def test_validation_eval_routes_are_fixed_family_draws() -> None:
+    """``validation`` eval targets are routes drawn from the families with fixed seeds:
+    distinct slots give distinct routes, every pass over the list repeats them, and none
+    is a held-out route."""
+    import gymnasium as gym
+
+    from training.common import ENV_ID, VALIDATION, HeldOutCycle, held_out_names
+
+    env = HeldOutCycle(gym.make(ENV_ID, **SMALL), [VALIDATION, VALIDATION, "u_turn"])
+    names, points = [], []
+    for _ in range(6):
+        env.reset()
+        t = env.unwrapped.target
+        names.append(t.name)
+        points.append(np.asarray(t.points).copy())
+    env.close()
+    assert names[2] == names[5] == "u_turn"
+    assert not np.array_equal(points[0], points[1]) or names[0] != names[1]
+    np.testing.assert_array_equal(points[0], points[3])
+    np.testing.assert_array_equal(points[1], points[4])
+    held = set(held_out_names({}))
+    assert names[0] not in held and names[1] not in held
+    with pytest.raises(ValueError, match="validation"):
+        HeldOutCycle(gym.make(ENV_ID, **SMALL), ["nope"])
+
+
+def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: Path) -> None:
+    """A run evaluated on validation routes is drawn with the follower and random scored
+    on those same routes (cached in the run), not with held-out rows."""
+    import yaml
+
+    from training.evaluate import eval_set_baselines, plot_learning_curves
+
+    run = tmp_path / "ppo_residual_s0"
+    run.mkdir()
+    cfg = {"env_kwargs": {**SMALL, "max_episode_steps": 2},
+           "callback": [{"training.callbacks.HeldOutEval": {
+               "eval_targets": ["validation", "validation"], "eval_freq": 10,
+               "n_eval_episodes": 2}}]}  # fmt: skip
+    meta = {"timesteps_done": 20, "wall_time_s": 120.0}
+    (run / "config.yml").write_text(yaml.safe_dump({"CNTDeposit-v0": cfg, "run": meta}))
+    np.savez(run / "evaluations.npz", timesteps=np.array([10, 20]),
+             results=np.array([[0.1, 0.2], [0.3, 0.4]]))  # fmt: skip
+    assert plot_learning_curves([run], tmp_path, rows=[])
+    assert (tmp_path / "learning_curves.png").is_file()
+    cached = json.loads((run / "eval_baselines.json").read_text())
+    assert cached["eval_targets"] == ["validation", "validation"] and cached["n"] == 2
+    assert set(cached["scores"]) == {"scripted", "random"}
+    assert all(0.0 <= v <= 1.0 for v in cached["scores"].values())
+    # the cache is what a second call reads
+    cached["scores"] = {"scripted": 0.5, "random": 0.25}
+    (run / "eval_baselines.json").write_text(json.dumps(cached))
+    assert eval_set_baselines(run) == {"scripted": 0.5, "random": 0.25}

@@ -19,6 +19,7 @@ from policies.residual import combine, make_base_policy, zoo_entry
 __all__ = [
     "CONFIG_DIR",
     "ENV_ID",
+    "VALIDATION",
     "HeldOutCycle",
     "ResidualAction",
     "algo_kwargs",
@@ -180,22 +181,39 @@ class ResidualAction(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
+#: An eval target that stands for a route drawn from the training families (a validation
+#: route, never a held-out test route); see :class:`HeldOutCycle`.
+VALIDATION = "validation"
+#: Reset seeds of the validation routes, far from the training and evaluation seeds.
+VALIDATION_SEED0 = 50_000
+
+
 class HeldOutCycle(gym.Wrapper):
-    """Every reset uses the next of ``targets`` (held-out names), in turn: EvalCallback
-    episodes then run over the held-out set. Reset seeds are ``seed0 + k``."""
+    """Every reset uses the next of ``targets``, in turn: EvalCallback episodes then run
+    over them. A target is a held-out name (reset seed ``seed0 + k``, k counting passes
+    over the list) or :data:`VALIDATION`: a route drawn from the env's families with the
+    fixed reset seed ``VALIDATION_SEED0 + i`` (i its place in the list), so every
+    evaluation sees the same validation routes and none of the held-out test set."""
 
     def __init__(self, env: gym.Env, targets: Sequence[str], seed0: int = 1000) -> None:
         super().__init__(env)
         known = held_out_names({"score": env.unwrapped.score_mode})
         for t in targets:
-            if t not in known:
-                raise ValueError(f"{t!r} is not a held-out target; choose from {known}")
+            if t not in known and t != VALIDATION:
+                raise ValueError(
+                    f"{t!r} is not a held-out target or {VALIDATION!r}; choose from {known}"
+                )
+        if not targets:
+            raise ValueError("HeldOutCycle needs at least one target")
         self.targets = tuple(targets)
         self.seed0 = int(seed0)
         self._k = 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        target = self.targets[self._k % len(self.targets)]
+        i = self._k % len(self.targets)
+        target = self.targets[i]
         seed = self.seed0 + (self._k // len(self.targets))
         self._k += 1
+        if target == VALIDATION:
+            return self.env.reset(seed=VALIDATION_SEED0 + i)
         return self.env.reset(seed=seed, options={"target": target})

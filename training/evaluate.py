@@ -51,12 +51,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from cnt_env.task import routes
 
 from .common import (
     CONFIG_DIR,
+    ENV_ID,
+    VALIDATION,
+    HeldOutCycle,
     env_settings,
+    eval_settings,
     fresh_dir,
     held_out_names,
     limit_threads,
@@ -326,33 +331,104 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
     plt.close(fig)
 
 
-def plot_learning_curves(runs: Sequence[Path], out: Path, baselines: dict[str, float]) -> bool:
-    """Mean return (= final score) on the EvalCallback's held-out targets against steps."""
-    curves = []
+#: Baselines drawn as lines on a learning curve (when evaluated on the curve's routes).
+CURVE_BASELINES = ("constant", "scripted", "random")
+
+
+def _run_info(run: Path) -> tuple[tuple[str, ...], int, str]:
+    """A run's EvalCallback routes, its eval episodes per evaluation and a label with its
+    sample count and wall time (from its config.yml; empty when absent)."""
+    path = Path(run) / "config.yml"
+    if not path.is_file():
+        return (), 0, Path(run).name
+    with path.open() as fh:
+        data = yaml.safe_load(fh)
+    cfg = data.get(ENV_ID, {}) if isinstance(data, dict) else {}
+    ev = eval_settings(cfg)
+    meta = data.get("run", {}) if isinstance(data, dict) else {}
+    label = Path(run).name
+    if "timesteps_done" in meta and "wall_time_s" in meta:
+        label += f" ({meta['timesteps_done']} steps, {meta['wall_time_s'] / 60:.0f} min)"
+    return tuple(ev["eval_targets"]), ev["n_eval_episodes"], label
+
+
+def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random")) -> dict:
+    """Mean final score of the no-model ``policies`` on a run's EvalCallback episodes
+    (the same routes and reset seeds, :class:`training.common.HeldOutCycle`), for runs
+    evaluated on validation routes, which ``cnt-evaluate`` does not score otherwise.
+    Cached in ``<run>/eval_baselines.json`` (recomputed if its routes differ)."""
+    run = Path(run)
+    targets, n, _ = _run_info(run)
+    cache = run / "eval_baselines.json"
+    if cache.is_file():
+        try:
+            data = json.loads(cache.read_text())
+            if data.get("eval_targets") == list(targets) and data.get("n") == n:
+                return {p: float(data["scores"][p]) for p in policies}
+        except (ValueError, KeyError, TypeError):
+            pass  # rebuilt below
+    env_kwargs, max_steps = env_settings(load_config(run / "config.yml"))
+    scores = {}
+    for p in policies:
+        env = HeldOutCycle(make_env(env_kwargs, max_steps), targets)
+        policy = _make_policy({"kind": p}, env)
+        vals = []
+        for i in range(n):
+            obs, info = env.reset()
+            policy.reset(i)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(policy.act(obs))
+                done = terminated or truncated
+            vals.append(float(info["score"]))
+        env.close()
+        scores[p] = float(np.mean(vals))
+    cache.write_text(json.dumps({"eval_targets": list(targets), "n": n, "scores": scores}) + "\n")
+    return scores
+
+
+def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) -> bool:
+    """Mean return (= final score) of each run's EvalCallback against training steps, one
+    panel per evaluation set, with the baselines on that set as dashed lines: from the
+    evaluated ``rows`` for held-out routes, from :func:`eval_set_baselines` for
+    validation routes. Labels give each run's sample count and wall time."""
+    groups: dict[tuple[str, ...], list] = defaultdict(list)
     for run in runs:
         path = Path(run) / "evaluations.npz"
         if path.is_file():
             d = np.load(path)
-            curves.append((Path(run).name, d["timesteps"], d["results"]))
-    if not curves:
+            targets, _, label = _run_info(Path(run))
+            groups[targets].append((Path(run), label, d["timesteps"], d["results"]))
+    if not groups:
         return False
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for name, t, r in curves:
-        m, s = r.mean(axis=1), r.std(axis=1)
-        color = COLORS.get(name.rsplit("_s", 1)[0])
-        ax.plot(t, m, marker="o", label=name, color=color)
-        ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
-    for name, v in baselines.items():
-        ax.axhline(v, ls="--", color=COLORS.get(name, "k"), lw=1, label=f"{name} (same targets)")
-    ax.set_xlabel("training steps")
-    ax.set_ylabel("eval return = final score Φ")
-    ax.set_title("EvalCallback on held-out targets")
-    ax.legend(fontsize=7)
+    fig, axes = plt.subplots(1, len(groups), figsize=(6 * len(groups), 4), squeeze=False)
+    for ax, (targets, curves) in zip(axes.flat, groups.items(), strict=True):
+        for run, label, t, r in curves:
+            m, s = r.mean(axis=1), r.std(axis=1)
+            color = COLORS.get(run.name.rsplit("_s", 1)[0])
+            ax.plot(t, m, marker="o", label=label, color=color)
+            ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
+        if VALIDATION in targets:
+            base = eval_set_baselines(curves[0][0])
+            where = f"{len(targets)} validation routes"
+        else:
+            base = {}
+            for p in CURVE_BASELINES:
+                v = [r["score"] for r in rows if r["policy"] == p and r["target"] in targets]
+                if v:
+                    base[p] = float(np.mean(v))
+            where = ", ".join(targets) or "?"
+        for name, v in base.items():
+            ax.axhline(v, ls="--", color=COLORS.get(name, "k"), lw=1, label=f"{name} (same routes)")
+        ax.set_xlabel("training steps")
+        ax.set_ylabel("eval return = final score Φ")
+        ax.set_title(f"EvalCallback on {where}", fontsize=9)
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "learning_curves.png", dpi=90)
     plt.close(fig)
@@ -507,13 +583,7 @@ def evaluate(
     (out / "results.md").write_text(markdown_tables(table))
     plot_traces(results, targets, out)
     if runs:
-        eval_targets = config.get("eval_targets") or []
-        base = {}
-        for p in ("constant", "scripted", "random"):
-            v = [r["score"] for r in rows if r["policy"] == p and r["target"] in eval_targets]
-            if v:
-                base[p] = float(np.mean(v))
-        plot_learning_curves(runs, out, base)
+        plot_learning_curves(runs, out, rows)
     if rrd is not None:
         paths = _rrd(results, Path(rrd))
         if paths:
