@@ -72,11 +72,15 @@ def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
-def test_evaluate_one_target_with_pretrained_models(tmp_path: Path) -> None:
+def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
+    """Every policy, with the pretrained models on the env settings they were trained on
+    and the committed constant-flow choice, on one held-out route (a few steps)."""
+    from training.common import load_config
     from training.evaluate import ALL_POLICIES, evaluate
 
-    config = {"max_episode_steps": 4, "env_kwargs": {"pattern_every": 0, "score": "thin"}}
-    table = evaluate(list(ALL_POLICIES), ["jog"], [0, 1, 2], config, tmp_path,
+    config = load_config(PRETRAINED_DIR / "ppo.yml")
+    config["env_kwargs"]["max_episode_steps"] = 4
+    table = evaluate(list(ALL_POLICIES), ["u_turn"], [0, 1, 2], config, tmp_path,
                      constant_from=RESULTS / "constant_best.json", jobs=2)  # fmt: skip
     overall = {r["policy"]: r for r in table if r["target"] == "ALL"}
     assert set(overall) == set(ALL_POLICIES)
@@ -87,11 +91,11 @@ def test_evaluate_one_target_with_pretrained_models(tmp_path: Path) -> None:
     assert {"score_mean", "score_std", "coverage_mean", "normalized_score"} <= set(rows[0])
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert set(summary) == {"policies", "targets", "seeds"}
-    assert summary["targets"] == ["jog"] and summary["seeds"] == [0, 1, 2]
+    assert summary["targets"] == ["u_turn"] and summary["seeds"] == [0, 1, 2]
     for p in ALL_POLICIES:
         s = summary["policies"][p]
         assert set(s) == {"score_mean", "score_std"} and 0.0 <= s["score_mean"] <= 1.0
-    assert (tmp_path / "traces_jog.png").is_file()
+    assert (tmp_path / "traces_u_turn.png").is_file()
 
 
 def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
@@ -114,6 +118,8 @@ def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     run = fresh_dir(tmp_path / "ppo_s0")
     model = train("ppo", config, run, seed=0, progress_bar=False)
     assert (run / "best_model.zip").is_file() and (run / "evaluations.npz").is_file()
+    best = load_policy(run / "best_model.zip", algo="ppo")  # with its own statistics
+    assert type(best.vecnormalize).__name__ == "NormalizerStats"
     for suffix in (".npz", ".json", ".pkl"):
         assert model.with_name(f"ppo_vecnormalize{suffix}").is_file()
     policy = load_policy(model)

@@ -12,7 +12,9 @@ never overwrites an earlier one) holds:
   (``VecNormalize.load``, for SB3 / rl-zoo tools; a pickle: load only your own);
 * ``MANIFEST.json``: the sha256 of the model files (zip, statistics, ``<algo>.yml``),
   checked by :func:`policies.load_policy`;
-* ``best_model.zip`` (EvalCallback: the best mean return on the held-out routes);
+* ``best_model.zip`` (EvalCallback: the best mean return on its evaluation routes) with
+  the VecNormalize statistics of that moment (``best_model_vecnormalize.npz`` + ``.json``)
+  and ``best_model.yml``, so it loads like the final model;
 * ``config.yml`` and ``<algo>.yml``: the resolved config (hyperparameters, env kwargs,
   seed, budget, versions, wall time);
 * ``evaluations.npz`` (EvalCallback on held-out targets) and ``learning_curve.csv``;
@@ -131,7 +133,7 @@ def train(
     limit_threads()
     import stable_baselines3
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
@@ -176,6 +178,16 @@ def train(
             env = HeldOutCycle(make_env(env_kwargs, max_steps), ev["eval_targets"])
             return Monitor(ResidualAction(env, **residual) if wrapper else env)
 
+        class SaveBestStats(BaseCallback):
+            """On a new best: the VecNormalize statistics of that moment beside
+            best_model.zip, so the best model loads with its own normalisation."""
+
+            def _on_step(self) -> bool:
+                venv = self.model.get_vec_normalize_env()
+                if venv is not None:
+                    save_vecnormalize(venv, vecnormalize_path(run / "best_model.zip"))
+                return True
+
         eval_env = DummyVecEnv([eval_env_fn])
         if norm:
             eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
@@ -187,6 +199,7 @@ def train(
                 eval_freq=max(1, ev["eval_freq"] // n_envs),
                 log_path=str(run),
                 best_model_save_path=str(run),  # best_model.zip
+                callback_on_new_best=SaveBestStats() if norm else None,
                 deterministic=True,
                 verbose=verbose,
             )
@@ -238,8 +251,9 @@ def train(
     with (run / "config.yml").open("w") as fh:
         yaml.safe_dump(resolved, fh, sort_keys=False)
     # beside the model too, for policies.load_policy (the residual base, the env settings)
-    with (run / f"{algo}.yml").open("w") as fh:
-        yaml.safe_dump(resolved, fh, sort_keys=False)
+    for name in (f"{algo}.yml", "best_model.yml"):
+        with (run / name).open("w") as fh:
+            yaml.safe_dump(resolved, fh, sort_keys=False)
     models = [model_path, run / "best_model.zip"]
     write_manifest(run, [f.name for m in models for f in model_files(m) if f.is_file()])
     print(f"{algo}: {model.num_timesteps} steps in {wall:.0f} s -> {model_path}")
