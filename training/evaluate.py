@@ -54,6 +54,7 @@ import numpy as np
 import yaml
 
 from cnt_env.task import routes
+from policies.residual import residual_settings
 
 from .common import (
     CONFIG_DIR,
@@ -335,21 +336,25 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
 CURVE_BASELINES = ("constant", "scripted", "random")
 
 
-def _run_info(run: Path) -> tuple[tuple[str, ...], int, str]:
-    """A run's EvalCallback routes, its eval episodes per evaluation and a label with its
-    sample count and wall time (from its config.yml; empty when absent)."""
+def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str]:
+    """A run's EvalCallback routes, its eval episodes per evaluation, its policy name
+    (``ppo``, ``sac``, ``ppo_residual``) and a label with its seed, sample count and wall
+    time (from its config.yml; the directory name when absent)."""
     path = Path(run) / "config.yml"
     if not path.is_file():
-        return (), 0, Path(run).name
+        return (), 0, Path(run).name.rsplit("_s", 1)[0], Path(run).name
     with path.open() as fh:
         data = yaml.safe_load(fh)
     cfg = data.get(ENV_ID, {}) if isinstance(data, dict) else {}
     ev = eval_settings(cfg)
     meta = data.get("run", {}) if isinstance(data, dict) else {}
-    label = Path(run).name
+    name = str(meta.get("algo", Path(run).name.rsplit("_s", 1)[0]))
+    if residual_settings(cfg):
+        name += "_residual"
+    label = f"{name} s{meta.get('seed', '?')}"
     if "timesteps_done" in meta and "wall_time_s" in meta:
         label += f" ({meta['timesteps_done']} steps, {meta['wall_time_s'] / 60:.0f} min)"
-    return tuple(ev["eval_targets"]), ev["n_eval_episodes"], label
+    return tuple(ev["eval_targets"]), ev["n_eval_episodes"], name, label
 
 
 def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random")) -> dict:
@@ -358,7 +363,7 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
     evaluated on validation routes, which ``cnt-evaluate`` does not score otherwise.
     Cached in ``<run>/eval_baselines.json`` (recomputed if its routes differ)."""
     run = Path(run)
-    targets, n, _ = _run_info(run)
+    targets, n, _, _ = _run_info(run)
     cache = run / "eval_baselines.json"
     if cache.is_file():
         try:
@@ -397,8 +402,8 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
         path = Path(run) / "evaluations.npz"
         if path.is_file():
             d = np.load(path)
-            targets, _, label = _run_info(Path(run))
-            groups[targets].append((Path(run), label, d["timesteps"], d["results"]))
+            targets, _, name, label = _run_info(Path(run))
+            groups[targets].append((Path(run), name, label, d["timesteps"], d["results"]))
     if not groups:
         return False
     import matplotlib
@@ -408,9 +413,9 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
 
     fig, axes = plt.subplots(1, len(groups), figsize=(6 * len(groups), 4), squeeze=False)
     for ax, (targets, curves) in zip(axes.flat, groups.items(), strict=True):
-        for run, label, t, r in curves:
+        for _, name, label, t, r in curves:
             m, s = r.mean(axis=1), r.std(axis=1)
-            color = COLORS.get(run.name.rsplit("_s", 1)[0])
+            color = COLORS.get(name)
             ax.plot(t, m, marker="o", label=label, color=color)
             ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
         if VALIDATION in targets:
