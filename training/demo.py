@@ -16,7 +16,7 @@
 
 The short run is for show: with a 2-minute budget it is far from the pretrained
 models, whose training (``cnt-train``, configs in ``training/configs``) took 1 h each
-(training/results/README.md).
+(training/README.md).
 """
 
 from __future__ import annotations
