@@ -237,7 +237,7 @@ def load_trace(path: str | os.PathLike[str]) -> dict[str, Any]:
         try:
             names = set(npz.files)
             if "format" not in names:
-                held = ", ".join(sorted(names)) or "nothing"
+                held = ", ".join(repr(n) for n in sorted(names)) or "nothing"
                 raise TraceFileError(
                     f"{path} is an .npz archive but not a cnt_env trace: it has no 'format' "
                     f"entry (it holds: {held}); {_WRITE_HINT}."

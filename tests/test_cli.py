@@ -223,6 +223,23 @@ def test_measure_a_foreign_npz(tmp_path: Path) -> None:
     assert "not a cnt_env trace" in stderr and "positions" in stderr
 
 
+def test_an_entry_name_with_a_newline_keeps_the_error_on_one_line(tmp_path: Path) -> None:
+    """Found by the 10 000-example fuzz: a zip entry named "\\normat.npy" (a newline in
+    it) split the error over two lines."""
+    import zipfile
+
+    buf = io.BytesIO()
+    np.save(buf, np.zeros(3))
+    bad = tmp_path / "newline.npz"
+    with zipfile.ZipFile(bad, "w") as zf:
+        zf.writestr("\normat.npy", buf.getvalue())
+        zf.writestr("trace\t.npy", buf.getvalue())
+    code, stdout, stderr = _call(["measure", str(bad)])
+    assert code == 2 and stdout == ""
+    assert stderr.count("\n") == 1 and stderr.startswith("cnt-sim: error: ")
+    assert "not a cnt_env trace" in stderr and "\\normat" in stderr and "\\t" in stderr
+
+
 def test_measure_a_missing_file(tmp_path: Path) -> None:
     code, _, stderr = _call(["measure", str(tmp_path / "nope.npz")])
     assert code == 2 and "no such file" in stderr

@@ -184,8 +184,14 @@ def build_parser(run_defaults: Mapping[str, Any] | None = None) -> argparse.Argu
     return parser
 
 
+def _one_line(message: str) -> str:
+    """The message with every control character (newline, tab, ...; a file's entry names
+    can hold them) written as an escape, so that an error stays on one line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
 def _error(message: str, code: int) -> int:
-    print(f"{PROG}: error: {message}", file=sys.stderr)
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
     return code
 
 
