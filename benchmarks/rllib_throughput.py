@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -31,30 +32,26 @@ RESULTS = Path(__file__).resolve().parent / "results" / "rllib_throughput.json"
 def measure(zoo: dict, runners: int, iterations: int) -> dict:
     algo = build_config(zoo, runners).build_algo()
     try:
-        algo.train()  # warm-up: compile, warm state, first rollouts
+        warm = algo.train()  # warm-up: compile, warm state, first rollouts
+        start = int(warm["num_env_steps_sampled_lifetime"])
         t0 = time.perf_counter()
-        steps0 = None
-        sampled = 0
         sample_s = 0.0
         for _ in range(iterations):
             r = algo.train()
-            lifetime = int(r["num_env_steps_sampled_lifetime"])
-            steps0 = lifetime if steps0 is None else steps0
             timers = r.get("timers", {})
             sample_s += float(timers.get("env_runner_sampling_timer", 0.0))
-            sampled = lifetime
         wall = time.perf_counter() - t0
-        first = r["env_runners"].get("num_env_steps_sampled", 0)
+        steps = int(r["num_env_steps_sampled_lifetime"]) - start
     finally:
         algo.stop()
-    per_iter = (sampled - steps0) / max(iterations - 1, 1) if iterations > 1 else first
     return {
         "env_runners": runners,
         "iterations": iterations,
-        "env_steps_per_iteration": per_iter,
+        "env_steps_per_iteration": steps / iterations,
         "wall_s": round(wall, 2),
-        "env_steps_per_s": round(per_iter * iterations / wall, 1),
-        "sampling_s_per_iteration": round(sample_s / iterations, 2),
+        "env_steps_per_s": round(steps / wall, 2),
+        # None when this RLlib version does not report the sampling timer
+        "sampling_s_per_iteration": round(sample_s / iterations, 2) if sample_s else None,
         "iteration_s": round(wall / iterations, 2),
     }
 
@@ -84,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         r["speedup_vs_first"] = round(r["env_steps_per_s"] / rows[0]["env_steps_per_s"], 2)
     result = {
-        "command": "python benchmarks/rllib_throughput.py " + " ".join(argv or []),
+        "command": "python benchmarks/rllib_throughput.py "
+        + " ".join(sys.argv[1:] if argv is None else argv),
         "cores": __import__("os").cpu_count(),
         "rows": rows,
         "per_runner_env_steps_per_s": round(base, 1),
