@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     end = samples[-1][1]
     after = [r for e, r in samples if e >= args.warmup]
     result = {
-        "command": "python benchmarks/soak.py " + " ".join(argv or []),
+        "command": "python benchmarks/soak.py " + " ".join(sys.argv[1:] if argv is None else argv),
         "episodes": args.episodes,
         "steps_per_episode": args.steps,
         "preset": args.preset,
