@@ -110,6 +110,18 @@ def _make_policy(spec: dict[str, Any], env):
     return load_policy(spec["model"], trust=bool(spec.get("trust")))
 
 
+def _play(env, policy, obs) -> tuple[int, float, dict[str, Any]]:
+    """Step ``env`` with ``policy`` from ``obs`` to the episode's end: (steps, return,
+    last info)."""
+    steps, ret = 0, 0.0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs))
+        steps += 1
+        ret += float(reward)
+        if terminated or truncated:
+            return steps, ret, info
+
+
 def run_episode(job: dict[str, Any]) -> dict[str, Any]:
     """One episode of ``job`` = {policy, spec, target, seed, env_kwargs, max_steps,
     save_dir}; returns the final metrics and the trace."""
@@ -123,13 +135,7 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
     t0 = time.perf_counter()
     obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
     policy.reset(job["seed"])
-    steps, ret = 0, 0.0
-    while True:
-        obs, reward, terminated, truncated, info = env.step(policy.act(obs))
-        steps += 1
-        ret += float(reward)
-        if terminated or truncated:
-            break
+    steps, ret, info = _play(env, policy, obs)
     base = env.unwrapped
     corridor = getattr(base.target, "width", None)  # route task: the corridor half-width
     trace = base.sim.trace()
@@ -336,13 +342,13 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
 CURVE_BASELINES = ("constant", "scripted", "random")
 
 
-def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str]:
+def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]]:
     """A run's EvalCallback routes, its eval episodes per evaluation, its policy name
-    (``ppo``, ``sac``, ``ppo_residual``) and a label with its seed, sample count and wall
-    time (from its config.yml; the directory name when absent)."""
+    (``ppo``, ``sac``, ``ppo_residual``), a label with its seed, sample count and wall
+    time, and its config entry (from its config.yml; the directory name when absent)."""
     path = Path(run) / "config.yml"
     if not path.is_file():
-        return (), 0, Path(run).name.rsplit("_s", 1)[0], Path(run).name
+        return (), 0, Path(run).name.rsplit("_s", 1)[0], Path(run).name, {}
     with path.open() as fh:
         data = yaml.safe_load(fh)
     cfg = data.get(ENV_ID, {}) if isinstance(data, dict) else {}
@@ -354,7 +360,7 @@ def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str]:
     label = f"{name} s{meta.get('seed', '?')}"
     if "timesteps_done" in meta and "wall_time_s" in meta:
         label += f" ({meta['timesteps_done']} steps, {meta['wall_time_s'] / 60:.0f} min)"
-    return tuple(ev["eval_targets"]), ev["n_eval_episodes"], name, label
+    return tuple(ev["eval_targets"]), ev["n_eval_episodes"], name, label, cfg
 
 
 def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random")) -> dict:
@@ -363,7 +369,7 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
     evaluated on validation routes, which ``cnt-evaluate`` does not score otherwise.
     Cached in ``<run>/eval_baselines.json`` (recomputed if its routes differ)."""
     run = Path(run)
-    targets, n, _, _ = _run_info(run)
+    targets, n, _, _, cfg = _run_info(run)
     cache = run / "eval_baselines.json"
     if cache.is_file():
         try:
@@ -372,20 +378,16 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
                 return {p: float(data["scores"][p]) for p in policies}
         except (ValueError, KeyError, TypeError):
             pass  # rebuilt below
-    env_kwargs, max_steps = env_settings(load_config(run / "config.yml"))
+    env_kwargs, max_steps = env_settings(cfg)
     scores = {}
     for p in policies:
         env = HeldOutCycle(make_env(env_kwargs, max_steps), targets)
         policy = _make_policy({"kind": p}, env)
         vals = []
         for i in range(n):
-            obs, info = env.reset()
+            obs, _ = env.reset()
             policy.reset(i)
-            done = False
-            while not done:
-                obs, _, terminated, truncated, info = env.step(policy.act(obs))
-                done = terminated or truncated
-            vals.append(float(info["score"]))
+            vals.append(float(_play(env, policy, obs)[2]["score"]))
         env.close()
         scores[p] = float(np.mean(vals))
     cache.write_text(json.dumps({"eval_targets": list(targets), "n": n, "scores": scores}) + "\n")
@@ -402,7 +404,7 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
         path = Path(run) / "evaluations.npz"
         if path.is_file():
             d = np.load(path)
-            targets, _, name, label = _run_info(Path(run))
+            targets, _, name, label, _ = _run_info(Path(run))
             groups[targets].append((Path(run), name, label, d["timesteps"], d["results"]))
     if not groups:
         return False

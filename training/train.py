@@ -248,13 +248,12 @@ def train(
             },
         },
     }
-    with (run / "config.yml").open("w") as fh:
-        yaml.safe_dump(resolved, fh, sort_keys=False)
-    # beside the model too, for policies.load_policy (the residual base, the env settings)
-    for name in (f"{algo}.yml", "best_model.yml"):
-        with (run / name).open("w") as fh:
-            yaml.safe_dump(resolved, fh, sort_keys=False)
     models = [model_path, run / "best_model.zip"]
+    # config.yml, and beside each model for policies.load_policy (the residual base, the
+    # env settings)
+    text = yaml.safe_dump(resolved, sort_keys=False)
+    for path in [run / "config.yml", *(m.with_suffix(".yml") for m in models if m.is_file())]:
+        path.write_text(text)
     write_manifest(run, [f.name for m in models for f in model_files(m) if f.is_file()])
     print(f"{algo}: {model.num_timesteps} steps in {wall:.0f} s -> {model_path}")
     return model_path
