@@ -99,8 +99,11 @@ def energy(q, rest, frozen, k_s, k_b, k_t, parts=("stretch", "bend_twist")) -> f
     return total
 
 
-def force_and_hessian(q, rest, frozen, k_s, k_b, k_t, parts=("stretch", "bend_twist")):
-    """Elastic force -dE/dq and dense Hessian d2E/dq2 assembled through the band."""
+def force_and_hessian(
+    q, rest, frozen, k_s, k_b, k_t, parts=("stretch", "bend_twist"), transport=False
+):
+    """Elastic force -dE/dq and the dense matrix assembled through the band: the DER
+    Hessian d2E/dq2, or with ``transport`` the exact Jacobian -dF/dq of the force."""
     n_nodes = (q.size + 1) // 4
     n_dof = q.size
     s = strains_from(q, frozen)
@@ -110,8 +113,9 @@ def force_and_hessian(q, rest, frozen, k_s, k_b, k_t, parts=("stretch", "bend_tw
         elastic.add_stretch(q, n_nodes, rest, k_s, force, ab, True)
     if "bend_twist" in parts:
         elastic.add_bend_twist(
-            q, n_nodes, s["m1"], s["m2"], s["twist"], voronoi(rest), k_b, k_t, force, ab, True
-        )
+            q, n_nodes, s["m1"], s["m2"], s["twist"], voronoi(rest), k_b, k_t, force, ab, True,
+            frozen.tangents, transport,
+        )  # fmt: skip
     dense = np.zeros((n_dof, n_dof))
     for i in range(n_dof):
         for j in range(max(0, i - KL), min(n_dof, i + KU + 1)):

@@ -6,6 +6,10 @@ configuration itself (as at the first Newton iterate). Central differences with 
 h have truncation error O(h^2); the tolerances below sit well under the size of any
 missing term (a wrong sign or factor gives relative errors of order 1).
 
+The solver's Jacobian (``transport=True``, the default of the Newton solve) is instead
+the exact Jacobian of the force as computed, also away from the frozen state, where the
+transported reference frame turns about each tangent: -dF/dq to round-off.
+
 What "the Hessian" is, precisely. The DER force formulas (Bergou 2010) are the exact
 gradient of the energy at the frozen state, but away from it the transported frame adds
 terms they omit (the holonomy of the reference twist, and the frame rotation in the
@@ -126,3 +130,64 @@ def test_hessian_is_symmetric_at_frozen_state() -> None:
     q, rest, frozen = random_rod(np.random.default_rng(7), n_nodes=8)
     _, hess = force_and_hessian(q, rest, frozen, **STIFF)
     assert np.max(np.abs(hess - hess.T)) < 1e-12 * np.max(np.abs(hess))
+
+
+def _moved(seed: int, scale: float):
+    """A random rod (its frozen state) and an iterate moved away from it by ``scale``."""
+    rng = np.random.default_rng(300 + seed)
+    q0, rest, frozen = random_rod(rng, n_nodes=5 + seed % 4)
+    q = q0 + scale * rng.normal(size=q0.size)
+    return q, rest, frozen
+
+
+@pytest.mark.parametrize("scale", [0.0, 0.05, 0.3])
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("part", list(PARTS))
+def test_exact_jacobian_is_minus_force_jacobian(seed: int, scale: float, part: str) -> None:
+    """With the transport terms the assembled matrix is -dF/dq itself, at the frozen
+    state and at iterates moved away from it (as in later Newton iterations)."""
+    q, rest, frozen = _moved(seed, scale)
+    parts = PARTS[part]
+    _, jac = force_and_hessian(q, rest, frozen, **STIFF, parts=parts, transport=True)
+    jac_fd = _fd_jacobian(lambda x: force_and_hessian(x, rest, frozen, **STIFF, parts=parts)[0], q)
+    err = np.max(np.abs(jac + jac_fd)) / np.max(np.abs(jac))
+    assert err < HESS_RTOL, f"{part}, moved {scale}: J vs -dF/dq relative error {err:.2e}"
+
+
+def test_der_hessian_misses_the_transport_terms_away_from_the_frozen_state() -> None:
+    """The check above is not vacuous: away from the frozen state even the symmetric part
+    of -dF/dq differs from the DER Hessian (the rotation of the transported frame)."""
+    q, rest, frozen = _moved(1, 0.3)
+    parts = PARTS["bend_twist"]
+    _, hess = force_and_hessian(q, rest, frozen, **STIFF, parts=parts)
+    jac_fd = _fd_jacobian(lambda x: force_and_hessian(x, rest, frozen, **STIFF, parts=parts)[0], q)
+    err = np.max(np.abs(hess + 0.5 * (jac_fd + jac_fd.T))) / np.max(np.abs(hess))
+    assert err > 1e-3, f"DER Hessian matches sym(-dF/dq) to {err:.2e}: nothing to test"
+
+
+def test_rotation_gradient_matches_finite_differences() -> None:
+    """d psi/d edge (elastic._rotation_gradient): the turn of the transported director
+    about the tangent, measured against the instantaneous transport's zero turn."""
+    from cnt_env.rod.elastic import _rotation_gradient
+    from cnt_env.rod.frames import parallel_transport
+
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        d = 1.7 * (a + 0.6 * rng.normal(size=3))
+        u = np.cross(a, rng.normal(size=3))
+        u /= np.linalg.norm(u)
+
+        def director(x: np.ndarray, u=u, a=a) -> np.ndarray:
+            out = np.empty(3)
+            parallel_transport(u, a, x / np.linalg.norm(x), out)
+            return out
+
+        t = d / np.linalg.norm(d)
+        d2 = np.cross(t, director(d))
+        fd = np.array([
+            (director(d + H_FD * ek) - director(d - H_FD * ek)) @ d2 / (2 * H_FD)
+            for ek in np.eye(3)
+        ])  # fmt: skip
+        assert np.allclose(_rotation_gradient(tuple(d), tuple(a)), fd, rtol=1e-7, atol=1e-10)

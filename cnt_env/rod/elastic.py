@@ -303,6 +303,59 @@ def _bend_twist_reduced(
     h[2, 4] += c2 * te[0]
 
 
+@njit(cache=True, inline="always")
+def _rotation_gradient(d: tuple, a: tuple) -> tuple:
+    """d psi / d edge for the edge vector d whose reference director is transported from
+    the unit tangent a: psi is the rotation of that director about t = d/|d| beyond
+    instantaneous parallel transport, d psi/d d = -(a x t) / ((1 + a.t) |d|) (zero at
+    t = a; FD-checked in tests/test_elastic_fd.py). Zero for antiparallel a and t, where
+    the transport is undefined."""
+    nd = math.sqrt(_dot(d, d))
+    t = (d[0] / nd, d[1] / nd, d[2] / nd)
+    den = (1.0 + _dot(a, t)) * nd
+    if den <= 1e-12 * nd:
+        return (0.0, 0.0, 0.0)
+    c = _cross(a, t)
+    return (-c[0] / den, -c[1] / den, -c[2] / den)
+
+
+@njit(cache=True)
+def _transport_terms(
+    e: tuple, f: tuple, ae: tuple, af: tuple, g: np.ndarray, h: np.ndarray, kx: np.ndarray
+) -> None:
+    """The Jacobian terms the DER Hessian h leaves out, in reduced coordinates: K (8 x 6,
+    columns e and f; the theta columns get none), so that the Jacobian of the computed
+    gradient g is h + K (docs/model.md §3, "Exact Jacobian").
+
+    Each edge's reference director is transported from its start-of-step tangent (ae,
+    af), so a change of the edge turns the director about its tangent by d psi =
+    grad_psi . d(edge) beyond instantaneous transport, which acts as a change of that
+    edge's theta: K[:, e] += h[:, theta_e] grad_psi_e^T (likewise f). At the start of
+    the step (t = a) that vanishes, but the gradient formula's own derivative under
+    instantaneous transport still adds (dE/dtheta_e) [t_e]_x / (2 |e|^2) on the (e, e)
+    block (likewise f): the curl of grad_psi, which is why the DER Hessian is only the
+    symmetric part of the force Jacobian.
+    """
+    ge = _rotation_gradient(e, ae)
+    gf = _rotation_gradient(f, af)
+    for r in range(8):
+        for c in range(3):
+            kx[r, c] = h[r, 6] * ge[c]
+            kx[r, 3 + c] = h[r, 7] * gf[c]
+    for blk in range(2):
+        d = e if blk == 0 else f
+        nd2 = _dot(d, d)
+        nd = math.sqrt(nd2)
+        s = g[6 + blk] / (2.0 * nd2 * nd)  # [t]_x = [d]_x / |d|
+        o = 3 * blk
+        kx[o + 0, o + 1] -= s * d[2]
+        kx[o + 0, o + 2] += s * d[1]
+        kx[o + 1, o + 0] += s * d[2]
+        kx[o + 1, o + 2] -= s * d[0]
+        kx[o + 2, o + 0] -= s * d[1]
+        kx[o + 2, o + 1] += s * d[0]
+
+
 @njit(cache=True)
 def add_bend_twist(
     q: np.ndarray,
@@ -316,13 +369,21 @@ def add_bend_twist(
     force: np.ndarray,
     ab: np.ndarray,
     with_hessian: bool,
+    tangents_old: np.ndarray,
+    transport: bool,
 ) -> None:
-    """Bending and twisting force -dE/dq and Hessian over all interior nodes."""
+    """Bending and twisting force -dE/dq and Jacobian over all interior nodes.
+
+    With ``transport`` the Jacobian is that of the force as computed, frames
+    time-parallel-transported from ``tangents_old`` (:func:`_transport_terms`); without
+    it, the symmetric DER Hessian (Bergou 2010; the primer). The force is the same
+    either way."""
     g = np.empty(8)
     h = np.zeros((8, 8))
     gk1 = np.empty(8)
     gk2 = np.empty(8)
     gtw = np.empty(8)
+    kx = np.zeros((8, 6))
     for i in range(1, n_nodes - 1):
         a0 = 4 * (i - 1)
         e = (q[a0 + 4] - q[a0], q[a0 + 5] - q[a0 + 1], q[a0 + 6] - q[a0 + 2])
@@ -338,6 +399,8 @@ def add_bend_twist(
         for a in range(8):  # mirror the upper triangle
             for b in range(a):
                 h[a, b] = h[b, a]
+        if transport:
+            _transport_terms(e, f, _vec(tangents_old[i - 1]), _vec(tangents_old[i]), g, h, kx)
         # H_q = T^T H_r T, each local DOF a = s0 r[i0] + s1 r[i1] (s1 = 0 when single)
         for a in range(11):
             ia0 = _R_INDEX[a, 0]
@@ -351,6 +414,20 @@ def add_bend_twist(
                 sb1 = _R_SIGN[b, 1]
                 hab = (sa0 * (sb0 * h[ia0, ib0] + sb1 * h[ia0, ib1])
                        + sa1 * (sb0 * h[ia1, ib0] + sb1 * h[ia1, ib1]))  # fmt: skip
-                ab[_DIAG + a - b, a0 + b] += hab
+                if not transport:
+                    ab[_DIAG + a - b, a0 + b] += hab
+                    if b != a:
+                        ab[_DIAG + b - a, a0 + a] += hab
+                    continue
+                # the transport terms are not symmetric: map K (8 x 6) both ways
+                kab = 0.0
+                if ib0 < 6:  # column b is a position DOF
+                    kab = (sa0 * (sb0 * kx[ia0, ib0] + sb1 * kx[ia0, ib1])
+                           + sa1 * (sb0 * kx[ia1, ib0] + sb1 * kx[ia1, ib1]))  # fmt: skip
+                ab[_DIAG + a - b, a0 + b] += hab + kab
                 if b != a:
-                    ab[_DIAG + b - a, a0 + a] += hab
+                    kba = 0.0
+                    if ia0 < 6:
+                        kba = (sb0 * (sa0 * kx[ib0, ia0] + sa1 * kx[ib0, ia1])
+                               + sb1 * (sa0 * kx[ib1, ia0] + sa1 * kx[ib1, ia1]))  # fmt: skip
+                    ab[_DIAG + b - a, a0 + a] += hab + kba

@@ -156,6 +156,13 @@ class NewtonOptions:
     # Evaluate a residual that is expected to converge alone, before assembling J (the
     # results are bit-identical either way; False is the pre-issue-11 cost, for A/B).
     residual_check: bool = True
+    # Newton's Jacobian with the frame-transport terms the DER Hessian omits
+    # (elastic._transport_terms; -dF/dq exactly). Off by default: on the deposition runs
+    # it saves 1-2% of the iterations (the residual sequence is set by the large first
+    # update, not by the Jacobian's error) and costs ~9% more per assembly
+    # (benchmarks/RESULTS.md, "Issue 11", exact Jacobian). False: the symmetric DER
+    # Hessian (Bergou 2010), bit-identical to tests/data/stepper_regression.npz.
+    exact_jacobian: bool = False
 
 
 @njit(cache=True)
@@ -217,16 +224,20 @@ def assemble(
     force: np.ndarray,
     ab: np.ndarray,
     rhs: np.ndarray,
+    tangents_old: np.ndarray,
+    transport: bool,
 ) -> float:
     """Residual f (stored as rhs = -f, zero on fixed DOFs) and Jacobian J in band storage
-    (identity rows on fixed DOFs). Returns max |f| over free DOFs (inf/NaN propagate)."""
+    (identity rows on fixed DOFs). Returns max |f| over free DOFs (inf/NaN propagate).
+    ``transport``: J includes the frame-transport terms (exact; elastic.add_bend_twist)."""
     n_dof = 4 * n_nodes - 1
     inv_dt2 = 1.0 / (dt * dt)
     for k in range(n_dof):
         force[k] = ext_force[k]
     band_zero(ab, n_dof)
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, True)
-    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True)
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True,
+                           tangents_old, transport)  # fmt: skip
     if drag_law == DRAG_LINEAR:
         add_linear_drag(
             q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
@@ -290,7 +301,9 @@ def residual(
     for k in range(n_dof):
         force[k] = ext_force[k]
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, False)
-    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False)
+    # (the tangents_old argument, here m1, is not read without the Jacobian)
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False,
+                           m1, False)  # fmt: skip
     if drag_law == DRAG_LINEAR:
         add_linear_drag(
             q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
@@ -364,6 +377,7 @@ def newton_solve(
     rhs: np.ndarray,
     out_stats: np.ndarray,
     check: bool = True,
+    transport: bool = True,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
@@ -407,7 +421,7 @@ def newton_solve(
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
                        flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
-                           sub_anchor, force, ab, rhs)  # fmt: skip
+                       sub_anchor, force, ab, rhs, tangents_old, transport)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
@@ -487,6 +501,7 @@ def implicit_step(
     rhs: np.ndarray,
     out_stats: np.ndarray,
     check: bool,
+    transport: bool,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
     step start, predict q_n + dt u_n on free DOFs, solve; commit (u, start-of-step
@@ -508,6 +523,7 @@ def implicit_step(
         c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
         update_tol * min_rest, max_iter, tangents, lengths,
         d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, check,
+        transport,
     )  # fmt: skip
     if status != CONVERGED:
         for k in range(n_dof):
@@ -799,7 +815,8 @@ class Rod:
         ab = self._ab
         elastic.add_stretch(self.q, n, self.rest_lengths, m.k_s, f, ab, False)
         elastic.add_bend_twist(self.q, n, self._m1, self._m2, self._twist,
-                               self.voronoi_lengths, m.k_b, m.k_t, f, ab, False)  # fmt: skip
+                               self.voronoi_lengths, m.k_b, m.k_t, f, ab, False,
+                               self.tangents_old, False)  # fmt: skip
         return f
 
     def kinetic_energy(self) -> float:
@@ -841,7 +858,7 @@ class Rod:
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
-            o.residual_check,
+            o.residual_check, o.exact_jacobian,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
