@@ -14,14 +14,15 @@ by default) it measures, in one process with one thread:
   restart through reset, whose time is not counted), with the share of the time spent
   inside the simulator and the solver counts per control step.
 
-``--coarse-delta`` adds the same measurement with the graded discretisation
-(DepositionConfig.coarse_delta), a physics option the convergence study must validate
-before it could become a default. ``--baseline N`` also runs N control steps of the
-paper's constant flow (v̄ = 0.037 along +x) and measures the serpentine it lays, which
-sets the episode length (max_episode_steps). Prints one JSON object.
+``--uniform`` adds the same measurement of each preset on a uniform suspended rod
+(``sim_options={"coarse_delta": None}``, the default before the graded mesh of
+``presets.ENV_SIM_DEFAULTS``) and the ratio of the two figures of merit. ``--baseline N``
+also runs N control steps of the paper's constant flow (v̄ = 0.037 along +x) and
+measures the serpentine it lays, which sets the episode length (max_episode_steps).
+Prints one JSON object.
 
     python benchmarks/env_throughput.py [--steps 200] [--presets serpentine,coil]
-                                        [--coarse-delta 4] [--small] [--baseline 600]
+                                        [--uniform] [--small] [--baseline 600]
                                         [--score corridor|thin] [--out FILE]
 """
 
@@ -173,10 +174,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--presets", default="serpentine,coil", help="comma separated")
     parser.add_argument("--out", default=None, help="also write the JSON here")
     parser.add_argument(
-        "--coarse-delta",
-        type=float,
-        default=None,
-        help="also measure the graded discretisation with this coarse delta",
+        "--uniform",
+        action="store_true",
+        help="also measure each preset on a uniform suspended rod (the previous default)",
     )
     parser.add_argument(
         "--small",
@@ -210,8 +210,12 @@ def main(argv: list[str] | None = None) -> None:
     for preset in [x for x in args.presets.split(",") if x]:
         result[preset] = measure(dict(base, preset=preset), args.steps)
         result[preset]["meets_goal"] = result[preset]["lvb_per_cpu_s"] >= GOAL_LVB_PER_CPU_S
-    if args.coarse_delta is not None:
-        result["graded"] = measure(dict(base, coarse_delta=args.coarse_delta), args.steps)
+        if args.uniform:
+            uni = measure(dict(base, preset=preset, sim_options={"coarse_delta": None}), args.steps)
+            result[preset]["uniform"] = uni
+            result[preset]["ratio_to_uniform"] = round(
+                result[preset]["lvb_per_cpu_s"] / uni["lvb_per_cpu_s"], 3
+            )
     if args.baseline > 0:
         with tempfile.TemporaryDirectory() as cache:
             result["baseline_pattern"] = baseline(dict(base, cache_dir=cache), args.baseline)

@@ -70,14 +70,26 @@ RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 300.0, "
 #: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
 DEMO_DEPOSIT: float = 300.0
 
-#: Simulator settings of the env on the stepped substrate, for speed (RESULTS.md,
-#: serpentine suite, case env_fast): 4x the validated step and 60 L_vb of deposited tail
-#: kept in the solve instead of 195. Validated for the issue-4 model (linear, sliding B:
-#: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb tail alone moves A and
-#: lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12 (RESULTS.md, issue 12).
-ENV_SIM_DEFAULTS: MappingProxyType[str, Any] = MappingProxyType(
-    {"dt_factor": 0.2, "tail_length": 60.0}
-)
+#: Simulator settings of the env, for speed, by substrate (RESULTS.md, issue 11, "graded
+#: mesh"; ``benchmarks/graded_mesh.py``):
+#:
+#: * both: a graded suspended rod, edges of 4 L_vb injected at the top and split to
+#:   delta_bar within 20 L_vb of the contact (``coarse_delta``, ``fine_length``; snapped
+#:   to a whole multiple of delta_bar, uniform when that is below 2 delta_bar). Against
+#:   the uniform rod: coil R0 -0.3%, serpentine A within +1.2% and lambda within 0.2% at
+#:   vbar = 0.019-0.12, at half the solved nodes (1.8-2.7x the L_vb per CPU-second).
+#: * stepped: 4x the validated step and 60 L_vb of deposited tail kept in the solve
+#:   instead of 195 (serpentine suite, case env_fast). Validated for the issue-4 model
+#:   (linear, sliding B: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb
+#:   tail alone moves A and lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12
+#:   (RESULTS.md, issue 12). On the flat substrate the step stays the validated one: 4x
+#:   moves R0 by +6.6%.
+ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
+    "flat": MappingProxyType({"coarse_delta": 4.0, "fine_length": 20.0}),
+    "stepped": MappingProxyType(
+        {"dt_factor": 0.2, "tail_length": 60.0, "coarse_delta": 4.0, "fine_length": 20.0}
+    ),
+})  # fmt: skip
 
 assert set(MESH) == set(PRESETS) == set(RUN_DEPOSIT) == set(RUN_TRANSIENT)
 

@@ -206,7 +206,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
     | `dt`               | 0.2 H̄ ...    | physics time step (tau); ENV_SIM_DEFAULTS       |
-    | `coarse_delta`     | None         | graded discretisation (DepositionConfig)        |
+    | `coarse_delta`     | 4.0          | graded mesh (DepositionConfig); ENV_SIM_DEFAULTS|
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
