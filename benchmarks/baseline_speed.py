@@ -1,16 +1,17 @@
 """Speed of the paper's baselines with their validated default configuration: the coil
-preset (Hbar = 253, Ibar = 2200, flat sticky substrate, no flow; goal 1000 L_vb in 30 s)
-or the serpentine preset (Hbar = 155, Ibar = 300, stepped, vbar = 0.037; goal 500 L_vb
-in 15 s).
+preset (Hbar = 253, Ibar = 2200, flat sticky substrate, no flow; issue 11's goal 1000
+L_vb in 30 s) or the serpentine preset (Hbar = 155, Ibar = 300, stepped, vbar = 0.037;
+goal 500 L_vb in 8 s).
 
 Prints JSON: wall time (numba compilation excluded), steps, mean Newton iterations per
-step, deposited length per wall-second, and the measured coil radius.
+step, deposited length per wall-second, and the measured pattern figures.
 
     python benchmarks/baseline_speed.py [--preset coil|serpentine] [--deposit L]
                                         [--delta D] [--coarse-delta C]
 
-Without --delta it runs the preset's validated mesh (coil: delta 0.125 near the contact,
-graded to 1 above; serpentine: delta 1); ``--delta 1`` gives a uniform delta = 1 rod.
+Without options it runs the preset's validated mesh (presets.MESH: uniform delta = 1 on
+both); ``--coarse-delta 4`` grades the suspended rod as the env does
+(presets.ENV_SIM_DEFAULTS).
 """
 
 from __future__ import annotations

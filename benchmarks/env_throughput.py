@@ -14,15 +14,16 @@ by default) it measures, in one process with one thread:
   restart through reset, whose time is not counted), with the share of the time spent
   inside the simulator and the solver counts per control step.
 
-``--uniform`` adds the same measurement of each preset on a uniform suspended rod
-(``sim_options={"coarse_delta": None}``, the default before the graded mesh of
+``--previous`` adds the same measurement of each preset with the env's settings before
+round 3 (a uniform suspended rod and the Newton tolerance 1e-8: ``sim_options=
+{"coarse_delta": None, "newton": NewtonOptions()}``, against the graded rod and 1e-5 of
 ``presets.ENV_SIM_DEFAULTS``) and the ratio of the two figures of merit. ``--baseline N``
 also runs N control steps of the paper's constant flow (v̄ = 0.037 along +x) and
 measures the serpentine it lays, which sets the episode length (max_episode_steps).
 Prints one JSON object.
 
     python benchmarks/env_throughput.py [--steps 200] [--presets serpentine,coil]
-                                        [--uniform] [--small] [--baseline 600]
+                                        [--previous] [--small] [--baseline 600]
                                         [--score corridor|thin] [--out FILE]
 """
 
@@ -48,6 +49,7 @@ from cnt_env.patterns import MeasureOptions  # noqa: E402
 from cnt_env.patterns import measure as measure_pattern  # noqa: E402
 from cnt_env.sim import warmstart  # noqa: E402
 from cnt_env.sim.deposition import DepositionSim  # noqa: E402
+from cnt_env.sim.stepper import NewtonOptions  # noqa: E402
 from cnt_env.task.env import CNTDepositEnv  # noqa: E402
 
 #: Issue 11's goal: L_vb of trace per CPU-second of env.step.
@@ -174,9 +176,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--presets", default="serpentine,coil", help="comma separated")
     parser.add_argument("--out", default=None, help="also write the JSON here")
     parser.add_argument(
-        "--uniform",
+        "--previous",
         action="store_true",
-        help="also measure each preset on a uniform suspended rod (the previous default)",
+        help="also measure each preset with the settings before round 3 (uniform rod, 1e-8)",
     )
     parser.add_argument(
         "--small",
@@ -210,11 +212,12 @@ def main(argv: list[str] | None = None) -> None:
     for preset in [x for x in args.presets.split(",") if x]:
         result[preset] = measure(dict(base, preset=preset), args.steps)
         result[preset]["meets_goal"] = result[preset]["lvb_per_cpu_s"] >= GOAL_LVB_PER_CPU_S
-        if args.uniform:
-            uni = measure(dict(base, preset=preset, sim_options={"coarse_delta": None}), args.steps)
-            result[preset]["uniform"] = uni
-            result[preset]["ratio_to_uniform"] = round(
-                result[preset]["lvb_per_cpu_s"] / uni["lvb_per_cpu_s"], 3
+        if args.previous:
+            before = {"coarse_delta": None, "newton": NewtonOptions()}
+            prev = measure(dict(base, preset=preset, sim_options=before), args.steps)
+            result[preset]["previous"] = prev
+            result[preset]["ratio_to_previous"] = round(
+                result[preset]["lvb_per_cpu_s"] / prev["lvb_per_cpu_s"], 3
             )
     if args.baseline > 0:
         with tempfile.TemporaryDirectory() as cache:

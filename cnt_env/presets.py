@@ -12,7 +12,6 @@ from __future__ import annotations
 from types import MappingProxyType
 from typing import Any
 
-from cnt_env.sim.stepper import NewtonOptions
 from cnt_env.units import PAPER_KAPPA_C_BAR, PRESETS
 
 __all__ = [
@@ -88,7 +87,7 @@ DEMO_DEPOSIT: float = 300.0
 #: * both: Newton stops at a residual of 1e-5 e_v instead of 1e-8 (the traces move by
 #:   < 1e-3 L_vb over 120-150 L_vb, the figures by < 1e-4 relative:
 #:   tests/test_stepper_speed_equivalence.py), 1.07-1.10x on the serpentine env.
-_ENV_NEWTON = NewtonOptions(residual_tol=1e-5)
+_ENV_NEWTON = MappingProxyType({"residual_tol": 1e-5})  # NewtonOptions fields
 ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
     "flat": MappingProxyType(
         {"coarse_delta": 4.0, "fine_length": 20.0, "newton": _ENV_NEWTON}

@@ -15,6 +15,7 @@ import numpy as np
 
 from cnt_env.presets import DEFAULT_KAPPA_C, ENV_SIM_DEFAULTS, mesh_for
 from cnt_env.sim.deposition import DepositionConfig
+from cnt_env.sim.stepper import NewtonOptions
 from cnt_env.units import DimensionlessParams, paper_groups
 
 __all__ = [
@@ -164,6 +165,11 @@ def deposition_config(
     cfg["coarse_delta"] = k * params.delta_bar if k >= 2 else None
     cfg.update(mapping_or_none("sim_options", sim_options))
     cfg.update({k: v for k, v in explicit.items() if v is not None})
+    if isinstance(cfg.get("newton"), Mapping):  # NewtonOptions fields, as in the defaults
+        try:
+            cfg["newton"] = NewtonOptions(**cfg["newton"])
+        except TypeError as exc:
+            raise ValueError(f"sim_options['newton']: {exc}") from exc
     try:
         return DepositionConfig(params=params, drag_law=drag_law, **cfg)
     except TypeError as exc:  # an unknown field in sim_options
