@@ -175,13 +175,30 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      progress_weight=0.0), dict(pattern_every=-1), dict(render_mode="ascii"),
      dict(warmup_seed=-1), dict(warmup_seed=1.5), dict(cache_dir=123), dict(drag_law="x"),
      dict(families="line"), dict(families=("straight", 3)), dict(physics=[1, 2]),
-     dict(sim_options={"no_such_option": 1}), dict(tolerance="wide"), dict(vbar_max=True),
+     dict(sim_options={"no_such_option": 1}), dict(sim_options={"newton": {"tol": 1e-5}}),
+     dict(tolerance="wide"), dict(vbar_max=True),
      dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
      dict(score="corridor", families=("zigzag",))],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
         CNTDepositEnv(**{**SMALL, **bad})
+
+
+def test_env_speed_settings_by_substrate() -> None:
+    """presets.ENV_SIM_DEFAULTS: a graded suspended rod (coarse 4 L_vb, snapped to a whole
+    multiple of delta_bar, uniform below 2 delta_bar) and Newton at 1e-5 on both
+    substrates; 4x the validated step on the stepped one only; sim_options overrides,
+    with NewtonOptions fields given as a dict."""
+    stepped = CNTDepositEnv().config
+    flat = CNTDepositEnv(preset="coil").config
+    for cfg in (stepped, flat):
+        assert (cfg.coarse_delta, cfg.fine_length, cfg.newton.residual_tol) == (4.0, 20.0, 1e-5)
+    assert (stepped.dt_factor, stepped.tail_length, flat.dt_factor) == (0.2, 60.0, 0.05)
+    assert CNTDepositEnv(delta_bar=1.5).config.coarse_delta == 4.5
+    assert CNTDepositEnv(delta_bar=3.0, initial_radius=6.5).config.coarse_delta is None
+    own = CNTDepositEnv(sim_options={"coarse_delta": None, "newton": {"residual_tol": 1e-8}})
+    assert own.config.coarse_delta is None and own.config.newton.residual_tol == 1e-8
 
 
 def test_a_bare_family_name_is_one_family() -> None:
