@@ -240,6 +240,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
+    * v0, revision 3 (simulator speed): the suspended rod is graded (``coarse_delta`` 4,
+      ``fine_length`` 20) and Newton stops at 1e-5 e_v, on both substrates
+      (``presets.ENV_SIM_DEFAULTS``): ~2x (stepped) and ~3.7x (flat) the trace per
+      CPU-second, pattern figures within ~1%; rollouts differ from revision 2's.
+      ``sim_options={"coarse_delta": None, "newton": {"residual_tol": 1e-8}}`` gives
+      revision 2's simulator.
     * v0, revision 2 (route task): ``score="corridor"`` by default: circuit routes with a
       corridor, pads and keep-outs (docs/task.md), the corridor score, per-route
       ``max_episode_steps`` and termination on completion, a control interval of 30 H̄
