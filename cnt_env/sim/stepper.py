@@ -377,7 +377,7 @@ def newton_solve(
     rhs: np.ndarray,
     out_stats: np.ndarray,
     check: bool = True,
-    transport: bool = True,
+    transport: bool = False,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers

@@ -308,7 +308,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
                                        vbar, phi, physics)  # fmt: skip
         self.substrate = "flat" if self.params.kappa_c_bar is None else "stepped"
         self.config = s.deposition_config(
-            preset, self.params, delta_bar, s.choice("drag_law", drag_law, tuple(DRAG_LAWS)),
+            preset, self.params, s.choice("drag_law", drag_law, tuple(DRAG_LAWS)),
             sim_options, dt=dt, coarse_delta=coarse_delta, initial_radius=initial_radius,
         )  # fmt: skip
         self.vbar_max = s.positive("vbar_max", vbar_max)

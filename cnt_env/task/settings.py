@@ -147,22 +147,18 @@ def physics_params(
 def deposition_config(
     preset: str,
     params: DimensionlessParams,
-    delta_bar: float | None,
     drag_law: str,
     sim_options: Mapping[str, Any] | None,
     **explicit: float | None,
 ) -> DepositionConfig:
-    """The simulator config: the preset's validated start-up radius and mesh, then the
-    env's speed settings (``ENV_SIM_DEFAULTS`` of the substrate; its graded mesh snapped
-    to a whole multiple of delta_bar), then ``sim_options``, then the ``explicit``
-    keywords that are not None (dt, coarse_delta, initial_radius)."""
-    mesh = mesh_for(preset)
-    cfg: dict[str, Any] = {"initial_radius": mesh["initial_radius"]}
-    if delta_bar is None and mesh["coarse_delta"] is not None:
-        cfg["coarse_delta"] = mesh["coarse_delta"]
+    """The simulator config: the preset's validated start-up radius, then the env's speed
+    settings (``ENV_SIM_DEFAULTS`` of the substrate; its graded mesh, which replaces the
+    preset's, snapped to a whole multiple of delta_bar), then ``sim_options``, then the
+    ``explicit`` keywords that are not None (dt, coarse_delta, initial_radius)."""
+    cfg: dict[str, Any] = {"initial_radius": mesh_for(preset)["initial_radius"]}
     cfg.update(ENV_SIM_DEFAULTS["flat" if params.kappa_c_bar is None else "stepped"])
-    k = round(cfg["coarse_delta"] / params.delta_bar)
-    cfg["coarse_delta"] = k * params.delta_bar if k >= 2 else None
+    n_fine = round(cfg["coarse_delta"] / params.delta_bar)  # fine edges per coarse one
+    cfg["coarse_delta"] = n_fine * params.delta_bar if n_fine >= 2 else None
     cfg.update(mapping_or_none("sim_options", sim_options))
     cfg.update({k: v for k, v in explicit.items() if v is not None})
     if isinstance(cfg.get("newton"), Mapping):  # NewtonOptions fields, as in the defaults
