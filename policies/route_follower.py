@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from cnt_env.task.spaces import action_from_flow
+from cnt_env.task.targets import resample
 
 from .scripted import amplitude_curve
 
@@ -53,6 +54,10 @@ class RouteFollower:
         margin: float = 0.0,
         clearance: float = 4.0,
         repulsion: float = 2.0,
+        observed_band: bool = True,
+        plan: bool = True,
+        plan_spacing: float = 1.0,
+        behind: float = 30.0,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -66,13 +71,24 @@ class RouteFollower:
         self.margin = float(margin)
         self.clearance = float(clearance)
         self.repulsion = float(repulsion)
+        self.observed_band = bool(observed_band)
+        self.plan = bool(plan)
+        self.plan_spacing = float(plan_spacing)
+        self.behind = float(behind)
+        self._half = np.zeros(2)
+        self._env = None  # set by from_env: where the route (and its keep-outs) comes from
+        self._route = None  # the route of the plan below (replanned when it changes)
+        self._route_pts = self._route_s = None
         v, a, _ = amplitude_curve()
         self._v, self._a = v, a
 
     @classmethod
     def from_env(cls, env, **kwargs) -> RouteFollower:
         base = env.unwrapped
-        return cls(base.observation_slices, base.vbar_max, spacing=base.target_spacing, **kwargs)
+        follower = cls(base.observation_slices, base.vbar_max, spacing=base.target_spacing,
+                       **kwargs)  # fmt: skip
+        follower._env = base
+        return follower
 
     def reset(self, seed: int | None = None) -> None:
         pass
@@ -83,6 +99,43 @@ class RouteFollower:
         fits = self._v[(self._a <= half_width - self.margin) & (self._v <= self.vbar_max)]
         return float(fits.max()) if fits.size else self.vbar_max
 
+    def band_half_widths(self, past: np.ndarray, centre: np.ndarray, vbar: float) -> np.ndarray:
+        """The band's half-extents (x, z) about ``centre``: the measured amplitude across
+        the steps (z) at least, the trace's own spread where it is wider (with
+        ``observed_band``)."""
+        half = np.array([0.0, float(np.interp(vbar, self._v, self._a))])
+        if self.observed_band:
+            half = np.maximum(half, np.max(np.abs(past - centre), axis=0))
+        return half
+
+    def planned_ahead(
+        self, o: np.ndarray, ahead: np.ndarray, half: np.ndarray
+    ) -> np.ndarray | None:
+        """The observation's route points ahead, moved off the route's keep-outs so that
+        a band of half-extents ``half`` plus ``clearance`` about them stays clear
+        (:func:`plan_around`), relative to the contact point; None without a plan (no env,
+        no keep-outs or ``plan`` off)."""
+        route = None if self._env is None else getattr(self._env, "target", None)
+        if not self.plan or route is None or not getattr(route, "keepouts", ()):
+            return None
+        if route is not self._route:
+            self._route, self._half = route, np.zeros(2)
+            self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
+        pts, s = self._route_pts, self._route_s
+        # the first point ahead is the route at the furthest point reached + one spacing:
+        # the contact point in the route's frame follows from it
+        s_next = min(o[self.slices["progress"].start] * s[-1] + self.spacing, s[-1])
+        contact = np.array([np.interp(s_next, s, pts[:, k]) for k in (0, 1)]) - ahead[0]
+        # the band only widens the plan (its widest so far): a plan that breathes with
+        # each period's spread would steer the centre up and down with it
+        self._half = np.maximum(self._half, half)
+        planned = plan_around(pts, route.keepouts, self._half + self.clearance)
+        # from ``behind`` before the furthest point: the progress runs ahead of the
+        # pattern's centre on a wide band, and aiming from there cuts the keep-out's corner
+        s_at = np.clip(s_next - self.behind + self.spacing * np.arange(len(ahead) + round(
+            self.behind / self.spacing)), 0.0, s[-1])  # fmt: skip
+        return np.column_stack([np.interp(s_at, s, planned[:, k]) for k in (0, 1)]) - contact
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         o = np.asarray(obs, dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
@@ -90,6 +143,10 @@ class RouteFollower:
         route = o[self.slices["route"]]
         width, keep = float(route[0]), route[1:3]
         centre = past.mean(axis=0)
+        vbar = self.speed_for(width)
+        planned = self.planned_ahead(o, ahead, self.band_half_widths(past, centre, vbar))
+        if planned is not None:
+            ahead = planned
         # the route ahead, from the centre's nearest point on it
         j0 = int(np.argmin(np.hypot(*(ahead - centre).T)))
         j = min(len(ahead) - 1, j0 + max(1, round(self.lookahead / self.spacing)))
@@ -103,18 +160,64 @@ class RouteFollower:
             t = t / n
             across = (centre - ahead[j0]) @ np.array([-t[1], t[0]])
             aim = aim - self.gain * across * np.array([-t[1], t[0]])
-        vbar = self.speed_for(width)
         # keep the band (half-width A(v̄) around the centre) off the nearest keep-out,
         # by where the centre is and where it is heading (the aim), whichever is closer
-        reach = float(np.interp(vbar, self._v, self._a)) + self.clearance
+        half = float(np.interp(vbar, self._v, self._a))
         intrusion, push = 0.0, np.zeros(2)
         for p in (centre, centre + aim):
             away = p - keep
             dist = math.hypot(*away)
-            if 1e-9 < dist < reach and reach - dist > intrusion:
-                intrusion, push = reach - dist, away / dist
+            if dist < 1e-9:
+                continue
+            n_away = away / dist
+            # the band's half-width toward the keep-out: the measured curve, or what the
+            # trace shows (wider when the flow leans off the x axis)
+            band = half
+            if self.observed_band:
+                band = max(band, float(np.max(np.abs((past - centre) @ n_away))))
+            reach = band + self.clearance
+            if dist < reach and reach - dist > intrusion:
+                intrusion, push = reach - dist, n_away
         aim = aim + self.repulsion * intrusion * push
         if math.hypot(*aim) < 1e-9:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])
         return action_from_flow(vbar, phi, self.vbar_max)
+
+
+def _inside(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd test of ``points`` (n, 2) against the polygon ``poly`` (k, 2)."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    x, z = points[:, :1], points[:, 1:]
+    crosses = (a[:, 1] > z) != (b[:, 1] > z)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xi = a[:, 0] + (z - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return (np.sum(crosses & (x < xi), axis=1) % 2) == 1
+
+
+def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:
+    """``points`` (n, 2) of a route, each moved out of every keep-out polygon's
+    neighbourhood: a point nearer a keep-out than ``reach`` (x, z) along the direction
+    from the keep-out (elliptic-ish: reach_x |n_x| + reach_z |n_z|), or inside it, goes
+    to that distance from its nearest boundary point. ``sweeps`` passes settle points
+    pushed from one keep-out toward another."""
+    out = np.array(points, dtype=np.float64)
+    for _ in range(sweeps):
+        for poly in keepouts:
+            a = np.asarray(poly, dtype=np.float64)
+            ab = np.roll(a, -1, axis=0) - a
+            t = np.einsum("nkj,kj->nk", out[:, None, :] - a[None], ab) / np.einsum(
+                "kj,kj->k", ab, ab
+            )
+            q = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (n, k, 2)
+            d = np.hypot(q[..., 0] - out[:, None, 0], q[..., 1] - out[:, None, 1])
+            near = q[np.arange(len(out)), np.argmin(d, axis=1)]
+            v = out - near
+            dist = np.hypot(*v.T)
+            inside = _inside(out, a)
+            n = np.where(dist[:, None] > 1e-9, v / np.maximum(dist, 1e-9)[:, None], 0.0)
+            n[inside] *= -1.0
+            r = np.abs(n) @ reach
+            move = inside | (dist < r)
+            out[move] = near[move] + r[move, None] * n[move]
+    return out
