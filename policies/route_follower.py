@@ -15,9 +15,21 @@ mean is that centre), toward a point ``lookahead`` L_vb ahead on the route:
   at 30);
 * the flow points from the centre to the aim, plus ``gain`` times the centre's offset
   across the route (back toward the route's line, which the drift alone corrects slowly);
-* a keep-out closer to the centre, or to the aim, than the band's half-width plus
-  ``clearance`` pushes the aim away from it, ``repulsion`` per L_vb of intrusion (the
-  observation's ``route`` slice holds the nearest keep-out point);
+* keep-outs (a short circuit zeroes the score after 20 nodes): with the route known
+  (:meth:`RouteFollower.from_env`; the route is what the user asked for, its keep-outs
+  are not all in the observation) the follower **plans around them**: every route point
+  nearer a keep-out than the band's half-extent plus ``clearance`` is moved out to that
+  distance (:func:`plan_around`; the half-extent per axis is the widest the trace has
+  shown this episode, at least the measured amplitude across the steps, since a band
+  leaning off the x axis is wider than the curve says), and the aim is taken from
+  ``behind`` L_vb before the furthest point reached (the progress runs ahead of the
+  centre on a wide band; aiming from there cuts the keep-out's corner). On 8 drawn
+  ``detour`` routes (seeds 0-7, never the held-out set) this took the mean score from
+  0.22 to 0.50 (plan and repulsion together: 0.34, so the plan replaces the repulsion);
+  routes without keep-outs are unchanged. Without the route, a keep-out closer to
+  the centre, or to the aim, than the band's half-width plus ``clearance`` pushes the aim
+  away from it, ``repulsion`` per L_vb of intrusion (the observation's ``route`` slice
+  holds the keep-out point nearest the contact point);
 * the speed: the fastest flow whose band fits the corridor (the amplitude curve
   ``policies/data/amplitude_curve.json``: A = 17 L_vb at v̄ = 0.13, 19 at 0.1, ...),
   v̄_max when none fits (the narrowest band). With the measured curve that is v̄_max for
@@ -136,6 +148,28 @@ class RouteFollower:
             self.behind / self.spacing)), 0.0, s[-1])  # fmt: skip
         return np.column_stack([np.interp(s_at, s, planned[:, k]) for k in (0, 1)]) - contact
 
+    def repulsion_from(self, keep: np.ndarray, centre: np.ndarray, aim: np.ndarray,
+                       past: np.ndarray, vbar: float) -> np.ndarray:  # fmt: skip
+        """The push on the aim away from the keep-out point ``keep``: ``repulsion`` per
+        L_vb by which the band (half-width A(v̄), or the trace's own spread toward the
+        keep-out with ``observed_band``) plus ``clearance`` about the centre, or about
+        where it is heading (the aim), reaches it, whichever is deeper."""
+        half = float(np.interp(vbar, self._v, self._a))
+        intrusion, push = 0.0, np.zeros(2)
+        for p in (centre, centre + aim):
+            away = p - keep
+            dist = math.hypot(*away)
+            if dist < 1e-9:
+                continue
+            n_away = away / dist
+            band = half
+            if self.observed_band:
+                band = max(band, float(np.max(np.abs((past - centre) @ n_away))))
+            reach = band + self.clearance
+            if dist < reach and reach - dist > intrusion:
+                intrusion, push = reach - dist, n_away
+        return self.repulsion * intrusion * push
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         o = np.asarray(obs, dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
@@ -160,25 +194,8 @@ class RouteFollower:
             t = t / n
             across = (centre - ahead[j0]) @ np.array([-t[1], t[0]])
             aim = aim - self.gain * across * np.array([-t[1], t[0]])
-        # keep the band (half-width A(v̄) around the centre) off the nearest keep-out,
-        # by where the centre is and where it is heading (the aim), whichever is closer
-        half = float(np.interp(vbar, self._v, self._a))
-        intrusion, push = 0.0, np.zeros(2)
-        for p in (centre, centre + aim):
-            away = p - keep
-            dist = math.hypot(*away)
-            if dist < 1e-9:
-                continue
-            n_away = away / dist
-            # the band's half-width toward the keep-out: the measured curve, or what the
-            # trace shows (wider when the flow leans off the x axis)
-            band = half
-            if self.observed_band:
-                band = max(band, float(np.max(np.abs((past - centre) @ n_away))))
-            reach = band + self.clearance
-            if dist < reach and reach - dist > intrusion:
-                intrusion, push = reach - dist, n_away
-        aim = aim + self.repulsion * intrusion * push
+        if planned is None:  # the plan replaces the repulsion
+            aim = aim + self.repulsion_from(keep, centre, aim, past, vbar)
         if math.hypot(*aim) < 1e-9:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])

@@ -149,3 +149,47 @@ def test_route_follower_steers_the_centre_along_the_route() -> None:
     assert phi_k > phi  # pushed away from it
     # the fastest flow drifts fastest and lays the narrowest band: every corridor gets it
     assert pol.speed_for(40.0) == pol.speed_for(10.0) == 0.13
+
+
+def test_plan_around_moves_the_route_off_a_keep_out_by_the_reach() -> None:
+    from policies.route_follower import plan_around
+
+    square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    pts = np.array([[5.0, 13.0], [5.0, 5.0], [11.0, 5.0], [5.0, 40.0], [13.0, 13.0]])
+    reach = np.array([2.0, 6.0])  # (x, z): the band is wider across the steps
+    out = plan_around(pts, (square,), reach)
+    # above the top edge: to 6 along z; right of it: to 2 along x
+    assert out[0] == pytest.approx([5.0, 16.0])
+    assert out[2] == pytest.approx([12.0, 5.0])
+    assert out[3] == pytest.approx(pts[3])  # far away: untouched
+    # inside, at the centre: out through the nearest edge (a tie: the first, z = 0)
+    assert out[1] == pytest.approx([5.0, -6.0])
+    # past a corner: along the diagonal to |n| . reach from the corner
+    n = np.array([1.0, 1.0]) / math.sqrt(2.0)
+    assert out[4] == pytest.approx(np.array([10.0, 10.0]) + (n @ reach) * n)
+    # idempotent: a planned route is already clear
+    assert plan_around(out, (square,), reach) == pytest.approx(out)
+
+
+def test_route_follower_plan_only_acts_where_there_are_keep_outs() -> None:
+    """On a route without keep-outs the (default) planning follower's actions equal the
+    plain one's; with a keep-out in the way, the plan steers further from it."""
+    from cnt_env.task import routes
+    from policies import RouteFollower
+
+    env = gymnasium.make("CNTDeposit-v0", score="corridor")
+    try:
+        obs, _ = env.reset(seed=0, options={"target": "u_turn"})
+        a = RouteFollower.from_env(env).act(obs)
+        b = RouteFollower.from_env(env, plan=False).act(obs)
+        assert np.array_equal(a, b)
+        # a keep-out just above the straight route's line, 30 L_vb ahead
+        block = {"waypoints": [[0, 0], [120, 0]], "width": 15.0,
+                 "keepouts": [{"rect": [20, 8, 60, 40]}]}  # fmt: skip
+        obs, _ = env.reset(seed=0, options={"target": block})
+        assert isinstance(env.unwrapped.target, routes.Route)
+        _, phi_plan = flow_from_action(RouteFollower.from_env(env).act(obs), 0.13)
+        _, phi_flat = flow_from_action(RouteFollower.from_env(env, plan=False).act(obs), 0.13)
+        assert phi_plan < phi_flat  # turned down, away from the block
+    finally:
+        env.close()
