@@ -9,7 +9,8 @@
 
 Each case runs the preset to ``--deposit`` L_vb and measures after ``--transient`` L_vb.
 Results are cached per case in ``benchmarks/results/<suite>_validation.json``
-(re-running skips finished cases), and a markdown table is printed.
+(re-running skips a finished case only if it ran with the same settings: a case cached
+under an older model default is run again), and a markdown table is printed.
 
     python benchmarks/validation.py coil [--jobs 2] [--cases default,delta_half,...]
     python benchmarks/validation.py serpentine --deposit 1500 --transient 150
@@ -43,7 +44,7 @@ def _suite_defaults() -> dict[str, dict]:
         out[suite] = {"delta_bar": mesh["delta_bar"], "coarse_delta": mesh["coarse_delta"],
                       **base, "initial_radius": mesh["initial_radius"]}  # fmt: skip
     out["serpentine"].update(sliding=sim["sliding"], phi=0.0, kappa_c_bar=DEFAULT_KAPPA_C,
-                             tail_length=sim["tail_length"])  # fmt: skip
+                             tail_length=sim["tail_length"], vbar=None)  # fmt: skip
     return out
 
 
@@ -52,6 +53,11 @@ SERPENTINE_CASES: dict[str, dict] = {
     "sliding_C": {"sliding": "C"},
     "delta_half": {"delta_bar": 0.5},
     "dt_half": {"dt_factor": 0.025},
+    # dt convergence at the ends of the flow range, where the contact moves fastest
+    "vbar_0.019": {"vbar": 0.019},
+    "vbar_0.019_dt_half": {"vbar": 0.019, "dt_factor": 0.025},
+    "vbar_0.12": {"vbar": 0.12},
+    "vbar_0.12_dt_half": {"vbar": 0.12, "dt_factor": 0.025},
     "kappa_c_0.1": {"kappa_c_bar": 0.1},
     "kappa_c_0.4": {"kappa_c_bar": 0.4},
     "phi_0.87": {"phi": 0.87},
@@ -89,6 +95,8 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     extra = {}
     if suite == "serpentine":
         groups.update(phi=c["phi"], kappa_c_bar=c["kappa_c_bar"])
+        if c["vbar"] is not None:  # None: the preset's
+            groups["vbar"] = c["vbar"]
         extra["sliding"] = c["sliding"]
         extra["tail_length"] = c["tail_length"]
     config = DepositionConfig(
@@ -136,7 +144,9 @@ def _row(suite: str, name: str, r: dict, ref: dict | None) -> str:
                 f"| {100 * (r['coil_radius'] / 7.64 - 1):+.1f}% | {rel} " + tail)  # fmt: skip
     rel_a = f"{100 * (r['amplitude'] / ref['amplitude'] - 1):+.1f}%" if ref else "-"
     rel_w = f"{100 * (r['wavelength'] / ref['wavelength'] - 1):+.1f}%" if ref else "-"
-    return (common + f"| {r['sliding']} | {r['kappa_c_bar']} | {r['phi']} | {r['pattern']} "
+    vbar = r.get("vbar") or "preset"
+    return (common + f"| {r['sliding']} | {r['kappa_c_bar']} | {vbar} | {r['phi']} "
+            f"| {r['pattern']} "
             f"| {r['amplitude']:.2f} ({rel_a}) | {r['wavelength']:.2f} ({rel_w}) "
             f"| {r['n_cycles']} | {r['n_loops']} " + tail)  # fmt: skip
 
@@ -144,9 +154,22 @@ def _row(suite: str, name: str, r: dict, ref: dict | None) -> str:
 CASES = {"coil": COIL_CASES, "serpentine": SERPENTINE_CASES}
 HEADERS = {
     "coil": "| case | delta | dt_factor | R_i | drag | R0 | vs 7.64 | vs default |",
-    "serpentine": "| case | delta | dt_factor | sliding | kappa_c | phi | pattern | amplitude "
-    "| wavelength | cycles | loops |",
+    "serpentine": "| case | delta | dt_factor | sliding | kappa_c | vbar | phi | pattern "
+    "| amplitude | wavelength | cycles | loops |",
 }
+
+
+def _same_settings(args: argparse.Namespace, name: str, cached: dict | None) -> bool:
+    """Whether ``cached`` ran case ``name`` as it would run now: the suite's current
+    defaults with the case's overrides, the same deposit and transient."""
+    if cached is None:
+        return False
+    now = {**_suite_defaults()[args.suite], **CASES[args.suite][name],
+           "deposit": args.deposit, "transient": args.transient}  # fmt: skip
+    stale = {k for k, v in now.items() if cached.get(k, None if v is None else "?") != v}
+    if stale:
+        print(f"{name}: cached with other settings ({', '.join(sorted(stale))}), run again")
+    return not stale
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -162,7 +185,7 @@ def main(argv: list[str] | None = None) -> None:
     results = Path(args.results or RESULTS_DIR / f"{args.suite}_validation.json")
     done = json.loads(results.read_text()) if results.exists() else {}
     names = args.cases.split(",") if args.cases else list(CASES[args.suite])
-    todo = [c for c in names if args.force or c not in done]
+    todo = [c for c in names if args.force or not _same_settings(args, c, done.get(c))]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
             c: pool.submit(run_case, args.suite, c, args.deposit, args.transient) for c in todo

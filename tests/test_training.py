@@ -148,6 +148,29 @@ def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
         assert 0.0 <= r["score_mean"] <= 1.0
 
 
+def test_evaluate_reuses_episodes_and_redoes_a_changed_baseline(tmp_path: Path) -> None:
+    """--reuse keeps a fully evaluated policy's episodes (the same rows, not re-run);
+    --redo runs a policy again even though the reused results have it."""
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 2}}
+    first = tmp_path / "first"
+    evaluate(["random", "scripted"], ["u_turn"], [0], config, first, jobs=1)
+    # mark the saved episodes: a reused row keeps the mark, a re-run one has a real time
+    saved = json.loads((first / "episodes.json").read_text())
+    (first / "episodes.json").write_text(json.dumps([{**r, "wall_s": -1.0} for r in saved]))
+
+    def wall(out: Path, **kw) -> dict[str, float]:
+        evaluate(["random", "scripted"], ["u_turn"], [0], config, out, jobs=1,
+                 reuse=[first], **kw)  # fmt: skip
+        with (out / "episodes.csv").open() as fh:
+            return {r["policy"]: float(r["wall_s"]) for r in csv.DictReader(fh)}
+
+    assert wall(tmp_path / "kept") == {"random": -1.0, "scripted": -1.0}
+    redone = wall(tmp_path / "redone", redo=["scripted"])
+    assert redone["random"] == -1.0 and redone["scripted"] >= 0.0
+
+
 def test_validation_eval_routes_are_fixed_family_draws() -> None:
     """``validation`` eval targets are routes drawn from the families with fixed seeds:
     distinct slots give distinct routes, every pass over the list repeats them, and none

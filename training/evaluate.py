@@ -5,6 +5,7 @@
                  [--config training/configs/ppo.yml] [--constant-from FILE]
                  [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
                  [--video DIR [--video-format mp4|gif]] [--trust]
+                 [--reuse DIR ... [--redo POLICIES]]
 
 For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 with the
 env settings of ``--config`` (the ones the models were trained with) and writes, in
@@ -500,6 +501,7 @@ def evaluate(
     save_episodes: Path | None = None,
     rrd: Path | None = None,
     reuse: Sequence[Path] = (),
+    redo: Sequence[str] = (),
     trust: bool = False,
     video: Path | None = None,
     video_format: str = "mp4",
@@ -519,8 +521,8 @@ def evaluate(
     if reuse:
         have = {(r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
                 for d in reuse for r in _load_results(Path(d), skip=set())}  # fmt: skip
-        reused = {p for p in policies
-                  if all((p, t, s) in have for t in targets for s in seeds)}  # fmt: skip
+        reused = {p for p in policies if p not in redo
+                  and all((p, t, s) in have for t in targets for s in seeds)}  # fmt: skip
         if reused:
             print(f"reusing the episodes of {sorted(reused)} from {reuse}")
     with ctx.Pool(jobs) as pool:
@@ -683,6 +685,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reuse", type=Path, nargs="*", default=[],
                    help="reuse the episodes of policies fully evaluated in these results "
                         "dirs (episodes.json + traces.npz); run only the others")  # fmt: skip
+    p.add_argument("--redo", default="",
+                   help="comma separated policies to run again even if --reuse has them "
+                        "(e.g. a changed baseline)")  # fmt: skip
     return p
 
 
@@ -703,7 +708,8 @@ def main(argv: list[str] | None = None) -> int:
         evaluate(_csv_list(args.policies), targets, seeds, config, out,
                  models=args.models, runs=args.runs, constant_from=args.constant_from,
                  jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
-                 reuse=args.reuse, trust=args.trust, video=args.video,
+                 reuse=args.reuse, redo=[p for p in args.redo.split(",") if p],
+                 trust=args.trust, video=args.video,
                  video_format=args.video_format)  # fmt: skip
     except (UntrustedModelError, FileNotFoundError) as exc:
         print(f"cnt-evaluate: error: {exc}", file=sys.stderr)
