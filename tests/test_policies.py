@@ -193,3 +193,28 @@ def test_route_follower_plan_only_acts_where_there_are_keep_outs() -> None:
         assert phi_plan < phi_flat  # turned down, away from the block
     finally:
         env.close()
+
+
+def test_route_follower_centre_is_the_midpoint_of_its_last_windows() -> None:
+    """With the contact known in the route's frame the centre is the midpoint of the
+    extent of the last ``memory`` trace windows (not the mean of the latest one, which
+    swings with the pattern's phase); without it, or with memory 0, the window's mean."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    layout = ObservationLayout(4, 4, (2.0,), route=True)
+    # one swing of a band: mostly at the top (z = 10), one point at the bottom (z = -30)
+    w1 = np.array([[-6.0, 10.0], [-4.0, 10.0], [-2.0, 10.0], [-1.0, -30.0]])
+    w2 = np.array([[-6.0, 8.0], [-4.0, 9.0], [-2.0, 10.0], [-1.0, 12.0]])
+    pol = RouteFollower(layout.slices, 0.13, memory=2)
+    assert pol.pattern_centre(w1, None) == pytest.approx(w1.mean(axis=0))
+    assert pol.pattern_centre(w1, np.zeros(2)) == pytest.approx([-3.5, -10.0])
+    # the contact moved 10 along x: both windows in the route's frame, back relative
+    c = pol.pattern_centre(w2, np.array([10.0, 0.0]))
+    assert c == pytest.approx([0.5 * (-6.0 + 9.0) - 10.0, -9.0])
+    c = pol.pattern_centre(w2, np.array([20.0, 0.0]))  # the first window has left
+    assert c == pytest.approx([0.5 * (4.0 + 19.0) - 20.0, 10.0])
+    flat = RouteFollower(layout.slices, 0.13, memory=0)
+    assert flat.pattern_centre(w1, np.zeros(2)) == pytest.approx(w1.mean(axis=0))
+    with pytest.raises(ValueError, match="memory"):
+        RouteFollower(layout.slices, 0.13, memory=-1)
