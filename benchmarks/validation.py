@@ -159,7 +159,8 @@ HEADERS = {
 }
 
 
-def _same_settings(args: argparse.Namespace, name: str, cached: dict | None) -> bool:
+def _same_settings(args: argparse.Namespace, name: str, cached: dict | None,
+                   quiet: bool = False) -> bool:  # fmt: skip
     """Whether ``cached`` ran case ``name`` as it would run now: the suite's current
     defaults with the case's overrides, the same deposit and transient."""
     if cached is None:
@@ -167,7 +168,7 @@ def _same_settings(args: argparse.Namespace, name: str, cached: dict | None) -> 
     now = {**_suite_defaults()[args.suite], **CASES[args.suite][name],
            "deposit": args.deposit, "transient": args.transient}  # fmt: skip
     stale = {k for k, v in now.items() if cached.get(k, None if v is None else "?") != v}
-    if stale:
+    if stale and not quiet:
         print(f"{name}: cached with other settings ({', '.join(sorted(stale))}), run again")
     return not stale
 
@@ -199,9 +200,14 @@ def main(argv: list[str] | None = None) -> None:
     header = HEADERS[args.suite] + " V Hbar | vdW work / length | Newton/step | wall s |"
     print(header)
     print("|" + "---|" * (header.count("|") - 1))
+    stale = []
     for name in CASES[args.suite]:
-        if name in done:
+        if name in done and _same_settings(args, name, done[name], quiet=True):
             print(_row(args.suite, name, done[name], ref))
+        elif name in done:
+            stale.append(name)
+    if stale:
+        print(f"not shown, cached with other settings (run them to refresh): {', '.join(stale)}")
 
 
 if __name__ == "__main__":
