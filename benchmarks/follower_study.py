@@ -1,0 +1,100 @@
+"""The scripted route follower's options, measured on routes drawn from the training
+families (never the held-out set): the evidence behind its defaults
+(``policies/route_follower.py``).
+
+    python benchmarks/follower_study.py [--families straight,l_route,...] [--seeds 0,1,2]
+        [--variant NAME=JSON ...] [--config training/configs/ppo_residual.yml]
+        [--jobs 2] [--out benchmarks/results/follower_study.jsonl]
+
+Each (variant, family, seed) is one episode of the config's env with
+``reset(seed=seed, options={"target": family})`` (the family's route drawn from the env's
+``np_random``), played by ``RouteFollower.from_env(env, **options)``. One JSON line per
+episode (score, precision, progress, shorts, steps); then the mean score per variant and
+family. The default variants: ``round3`` (no plan, the window's mean, the plain
+repulsion: the follower before this study), ``plan`` (plan around keep-outs, memory 0),
+``default`` (the shipped options).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import time
+from collections import defaultdict
+from pathlib import Path
+
+FAMILIES = ("straight", "l_route", "u_route", "staircase", "arc", "band", "pads", "detour")
+VARIANTS = {
+    "round3": {"plan": False, "observed_band": False, "memory": 0},
+    "plan": {"memory": 0},
+    "default": {},
+}
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _episode(job: tuple) -> dict:
+    from policies import RouteFollower
+    from training.common import env_settings, limit_threads, load_config, make_env
+
+    variant, options, family, seed, config = job
+    limit_threads()
+    env_kwargs, max_steps = env_settings(load_config(config))
+    env = make_env(env_kwargs, max_steps)
+    try:
+        policy = RouteFollower.from_env(env, **options)
+        t0 = time.perf_counter()
+        obs, _ = env.reset(seed=seed, options={"target": family})
+        policy.reset(seed)
+        steps = 0
+        while True:
+            obs, _, terminated, truncated, info = env.step(policy.act(obs))
+            steps += 1
+            if terminated or truncated:
+                break
+        return {"variant": variant, "options": options, "family": family, "seed": seed,
+                **{k: float(info[k]) for k in ("score", "precision", "progress")},
+                "shorts": int(info["shorts"]), "steps": steps,
+                "wall_s": round(time.perf_counter() - t0, 2)}  # fmt: skip
+    finally:
+        env.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--families", default=",".join(FAMILIES))
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--variant", action="append", default=[],
+                   help="NAME=JSON options (default: round3, plan, default)")  # fmt: skip
+    p.add_argument("--config", type=Path, default=ROOT / "training/configs/ppo_residual.yml")
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/follower_study.jsonl")
+    args = p.parse_args(argv)
+    variants = dict(VARIANTS)
+    if args.variant:
+        variants = {}
+        for v in args.variant:
+            name, _, text = v.partition("=")
+            variants[name] = json.loads(text) if text else {}
+    seeds = [int(s) for s in args.seeds.split(",")]
+    families = args.families.split(",")
+    jobs = [(name, opts, f, s, str(args.config))
+            for name, opts in variants.items() for f in families for s in seeds]  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    by = defaultdict(list)
+    with mp.get_context("forkserver").Pool(args.jobs) as pool, args.out.open("a") as fh:
+        for row in pool.imap(_episode, jobs):
+            fh.write(json.dumps(row) + "\n")
+            fh.flush()
+            by[row["variant"], row["family"]].append(row["score"])
+    print("| variant | " + " | ".join(families) + " | mean |")
+    print("|---" * (len(families) + 2) + "|")
+    for name in variants:
+        cells = [sum(by[name, f]) / len(by[name, f]) for f in families]
+        allv = [x for f in families for x in by[name, f]]
+        print(f"| {name} | " + " | ".join(f"{c:.3f}" for c in cells)
+              + f" | **{sum(allv) / len(allv):.3f}** |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
