@@ -328,10 +328,16 @@ def check_model(model_path: str | Path, algo: str | None = None, trust: bool = F
 
 
 def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu",
-                trust: bool = False) -> SB3Policy:  # fmt: skip
+                trust: bool = False, env=None) -> SB3Policy:  # fmt: skip
     """Load ``model_path`` (``.zip``; ``algo`` from the file name if not given), the
     VecNormalize statistics beside it, if any, and, if the resolved config beside it
     (``<name>.yml``) says the agent is residual, its base policy.
+
+    ``env`` is the env the policy will act in. A residual agent's base (the route
+    follower) reads the episode's route from it, as it did in training (its plan around
+    keep-outs and its memory of the band); without ``env`` the base sees only the
+    observation, a weaker follower than the one the agent was trained on, and a warning
+    says so.
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
@@ -363,9 +369,16 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         if residual is not None:
             from cnt_env.task import CNTDepositEnv
 
-            env_kwargs = dict(entry.get("env_kwargs") or {})
-            env_kwargs.pop("max_episode_steps", None)  # gymnasium.make's, not the env's
-            base = make_base_policy(residual.get("base", "scripted"), CNTDepositEnv(**env_kwargs))
+            if env is None:
+                import warnings
+
+                warnings.warn(f"{model_path.name} is a residual agent: pass env= (the env it "
+                              "acts in) to load_policy, or its base follower cannot see the "
+                              "route it was trained to read", stacklevel=2)  # fmt: skip
+                env_kwargs = dict(entry.get("env_kwargs") or {})
+                env_kwargs.pop("max_episode_steps", None)  # gymnasium.make's, not the env's
+                env = CNTDepositEnv(**env_kwargs)
+            base = make_base_policy(residual.get("base", "scripted"), env)
             scale = float(residual.get("scale", 0.5))
     return SB3Policy(model, vn, name=algo, base=base, scale=scale)
 

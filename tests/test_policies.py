@@ -100,8 +100,13 @@ def test_pretrained_models_load_with_their_normalisation(name: str) -> None:
     from training.common import env_settings, load_config
 
     env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / f"{name}.yml"))
-    n_obs = gym.make("CNTDeposit-v0", **env_kwargs).observation_space.shape[0]
-    pol = load_policy(PRETRAINED_DIR / f"{name}.zip")
+    env = gym.make("CNTDeposit-v0", **env_kwargs)
+    n_obs = env.observation_space.shape[0]
+    pol = load_policy(PRETRAINED_DIR / f"{name}.zip", env=env)
+    if name == "ppo_residual":  # its base follower reads the route of the env it acts in
+        assert pol.base._env is env.unwrapped
+        with pytest.warns(UserWarning, match="pass env="):
+            assert load_policy(PRETRAINED_DIR / f"{name}.zip").base._env is not env.unwrapped
     # the statistics and the network fit the env the model's own config makes
     assert pol.vecnormalize is not None and pol.vecnormalize.obs_rms.mean.shape == (n_obs,)
     assert pol.model.observation_space.shape == (n_obs,)

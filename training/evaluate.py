@@ -108,7 +108,7 @@ def _make_policy(spec: dict[str, Any], env):
         if env.unwrapped.score_mode == "corridor":
             return RouteFollower.from_env(env)
         return ScriptedPolicy.from_env(env)
-    return load_policy(spec["model"], trust=bool(spec.get("trust")))
+    return load_policy(spec["model"], trust=bool(spec.get("trust")), env=env)
 
 
 def _play(env, policy, obs) -> tuple[int, float, dict[str, Any]]:
@@ -290,7 +290,11 @@ def _load_results(path: Path, skip: set[str]) -> list[dict[str, Any]]:
 # ---- plots --------------------------------------------------------------------------------
 
 
-def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: Path) -> None:
+def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: Path,
+                route_of: dict[str, Any] | None = None) -> None:  # fmt: skip
+    """``traces_<target>.png`` and ``traces.png``: each policy's first-seed trace over the
+    target; with ``route_of`` (target -> Route, the corridor task) the route's corridor,
+    pads and keep-outs from the route itself (reused episodes do not carry them)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -307,7 +311,12 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
         from cnt_env.plotting import draw_route
 
         r0 = next(first[(p, t)] for p in policies if (p, t) in first)
-        draw_route(ax, r0["target_points"], corridor=r0.get("corridor"))
+        route = (route_of or {}).get(t)
+        if route is not None:
+            draw_route(ax, r0["target_points"], corridor=route.width, pads=route.pads,
+                       keepouts=route.keepouts)  # fmt: skip
+        else:
+            draw_route(ax, r0["target_points"], corridor=r0.get("corridor"))
         for p in policies:
             if (p, t) in first:
                 tr = first[(p, t)]["trace"]
@@ -590,7 +599,10 @@ def evaluate(
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
-    plot_traces(results, targets, out)
+    route_of = None
+    if score_mode(env_kwargs) == "corridor":
+        route_of = {t: routes.held_out(t) for t in targets}
+    plot_traces(results, targets, out, route_of)
     if runs:
         plot_learning_curves(runs, out, rows)
     if rrd is not None:
