@@ -224,3 +224,6 @@ def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: 
     cached["scores"] = {"scripted": 0.5, "random": 0.25}
     (run / "eval_baselines.json").write_text(json.dumps(cached))
     assert eval_set_baselines(run) == {"scripted": 0.5, "random": 0.25}
+    # ... unless the baselines' code changed since (a follower improved): scored again
+    (run / "eval_baselines.json").write_text(json.dumps({**cached, "code": "older"}))
+    assert eval_set_baselines(run) != {"scripted": 0.5, "random": 0.25}

@@ -373,18 +373,35 @@ def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]
     return tuple(ev["eval_targets"]), ev["n_eval_episodes"], name, label, cfg
 
 
+def _baselines_code() -> str:
+    """A fingerprint of the no-model baselines' source (policies/base.py, scripted.py,
+    route_follower.py): a cached baseline score is stale when it changes."""
+    import hashlib
+
+    import policies
+
+    root = Path(policies.__file__).parent
+    h = hashlib.sha256()
+    for name in ("base.py", "scripted.py", "route_follower.py"):
+        h.update((root / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
 def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random")) -> dict:
     """Mean final score of the no-model ``policies`` on a run's EvalCallback episodes
     (the same routes and reset seeds, :class:`training.common.HeldOutCycle`), for runs
     evaluated on validation routes, which ``cnt-evaluate`` does not score otherwise.
-    Cached in ``<run>/eval_baselines.json`` (recomputed if its routes differ)."""
+    Cached in ``<run>/eval_baselines.json`` (recomputed if its routes or the baselines'
+    code differ)."""
     run = Path(run)
     targets, n, _, _, cfg = _run_info(run)
     cache = run / "eval_baselines.json"
+    code = _baselines_code()
     if cache.is_file():
         try:
             data = json.loads(cache.read_text())
-            if data.get("eval_targets") == list(targets) and data.get("n") == n:
+            if (data.get("eval_targets") == list(targets) and data.get("n") == n
+                    and data.get("code") == code):  # fmt: skip
                 return {p: float(data["scores"][p]) for p in policies}
         except (ValueError, KeyError, TypeError):
             pass  # rebuilt below
@@ -400,7 +417,8 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
             vals.append(float(_play(env, policy, obs)[2]["score"]))
         env.close()
         scores[p] = float(np.mean(vals))
-    cache.write_text(json.dumps({"eval_targets": list(targets), "n": n, "scores": scores}) + "\n")
+    cache.write_text(json.dumps({"eval_targets": list(targets), "n": n, "code": code,
+                                 "scores": scores}) + "\n")  # fmt: skip
     return scores
 
 
