@@ -106,6 +106,7 @@ class RouteFollower:
         self._route = None  # the route of the state below (cleared when it changes)
         self._route_pts = self._route_s = None
         self._half = np.zeros(2)  # the band's widest half-extents on this route
+        self._planned: np.ndarray | None = None  # the route planned for ``_half``
         self._windows: deque[np.ndarray] = deque(maxlen=max(1, self.memory))
         self._s_next = 0.0  # arc length of the observation's first route point
         v, a, _ = amplitude_curve()
@@ -132,7 +133,7 @@ class RouteFollower:
         if route is None or not hasattr(route, "waypoints"):
             return None
         if route is not self._route:
-            self._route, self._half = route, np.zeros(2)
+            self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
@@ -165,9 +166,12 @@ class RouteFollower:
             return None
         pts, s = self._route_pts, self._route_s
         # the band only widens the plan (its widest so far): a plan that breathes with
-        # each period's spread would steer the centre up and down with it
-        self._half = np.maximum(self._half, half)
-        planned = plan_around(pts, self._route.keepouts, self._half + self.clearance)
+        # each period's spread would steer the centre up and down with it; so it is
+        # redone only when the band has widened
+        if self._planned is None or np.any(half > self._half):
+            self._half = np.maximum(self._half, half)
+            self._planned = plan_around(pts, self._route.keepouts, self._half + self.clearance)
+        planned = self._planned
         # from ``behind`` before the furthest point: the progress runs ahead of the
         # pattern's centre on a wide band, and aiming from there cuts the keep-out's corner
         s_at = np.clip(self._s_next - self.behind + self.spacing * np.arange(

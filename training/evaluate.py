@@ -738,7 +738,7 @@ def main(argv: list[str] | None = None) -> int:
         evaluate(_csv_list(args.policies), targets, seeds, config, out,
                  models=args.models, runs=args.runs, constant_from=args.constant_from,
                  jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
-                 reuse=args.reuse, redo=[p for p in args.redo.split(",") if p],
+                 reuse=args.reuse, redo=_csv_list(args.redo),
                  trust=args.trust, video=args.video,
                  video_format=args.video_format)  # fmt: skip
     except (UntrustedModelError, FileNotFoundError) as exc:
