@@ -20,6 +20,7 @@ import json
 import math
 import multiprocessing
 import os
+import re
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -208,10 +209,31 @@ PAPER_CLASS = [
 ]
 
 
+def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None) -> Any:
+    """The DepositionConfig of a point: the preset's (mesh included) with the candidate's
+    options, the point's groups and ``dt_factor``."""
+    from cnt_env.sim.deposition import ContactOptions, default_config
+
+    changes = dict(CANDIDATES[candidate])
+    if point["preset"] == COIL:  # the candidates are stepped-substrate options
+        changes = {k: v for k, v in changes.items() if k in ("drag_law", "contact_mode")}
+    mode = changes.pop("contact_mode", None)
+    if mode is not None:
+        changes["contact"] = ContactOptions(mode=mode)
+    if dt_factor is not None:
+        changes["dt_factor"] = dt_factor
+    changes.update(point["groups"])
+    return default_config(point["preset"], **changes)
+
+
 def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None) -> str:
+    """The point's name in results.jsonl; it names the mesh and Newton tolerance it ran
+    with, so a change of either default runs the point again."""
     g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
     dt = "" if dt_factor is None else f"|dt={dt_factor:g}"
-    return f"{candidate}|{point['preset']}|{g}{dt}"
+    cfg = point_config(point, candidate, dt_factor)
+    mesh = f"coarse={cfg.coarse_delta or 0:g},fine={cfg.fine_length:g}"
+    return f"{candidate}|{point['preset']}|{g}{dt}|{mesh},tol={cfg.newton.residual_tol:g}"
 
 
 def run_point(
@@ -226,19 +248,10 @@ def run_point(
 
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.presets import RUN_DEPOSIT, RUN_TRANSIENT
-    from cnt_env.sim.deposition import ContactOptions, DepositionSim, default_config
+    from cnt_env.sim.deposition import DepositionSim
 
-    changes = dict(CANDIDATES[candidate])
     preset = point["preset"]
-    if preset == COIL:  # the candidates are stepped-substrate options; drag law applies
-        changes = {k: v for k, v in changes.items() if k in ("drag_law", "contact_mode")}
-    mode = changes.pop("contact_mode", None)
-    if mode is not None:
-        changes["contact"] = ContactOptions(mode=mode)
-    if dt_factor is not None:
-        changes["dt_factor"] = dt_factor
-    changes.update(point["groups"])
-    cfg = default_config(preset, **changes)
+    cfg = point_config(point, candidate, dt_factor)
     length = deposit if deposit is not None else RUN_DEPOSIT[preset]
     transient = min(RUN_TRANSIENT[preset], 0.3 * length)
     sim = DepositionSim(cfg, seed=seed)
@@ -279,6 +292,9 @@ def run_point(
         "friction": cfg.friction,
         "tail_clamp": cfg.tail_clamp,
         "tail_length": cfg.tail_length,
+        "coarse_delta": cfg.coarse_delta,
+        "fine_length": cfg.fine_length,
+        "residual_tol": cfg.newton.residual_tol,
         "contact_mode": cfg.contact.mode,
         "deposit": length,
         "transient": transient,
@@ -401,7 +417,8 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
                   "| point | dt_factor | A | lambda_x | A at default | lambda_x at default |",
                   "|---|---|---|---|---|---|"]  # fmt: skip
         for r in other:
-            base = [b for b in recs if b["key"] == r["key"].split("|dt=")[0]]
+            same = re.sub(r"\|dt=[^|]*", "", r["key"])  # the point at the default step
+            base = [b for b in recs if b["key"] == same]
             b = base[0] if base else {"amplitude": None, "wavelength_x": None}
             g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
             lines.append(

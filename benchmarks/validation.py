@@ -33,16 +33,18 @@ def _suite_defaults() -> dict[str, dict]:
     serpentine the paper's kappa_c; no value is copied here."""
     import dataclasses
 
-    from cnt_env.presets import DEFAULT_KAPPA_C, MESH
+    from cnt_env.presets import DEFAULT_KAPPA_C, MESH, NEWTON
     from cnt_env.sim.deposition import DepositionConfig
 
     sim = {f.name: f.default for f in dataclasses.fields(DepositionConfig)}
-    base = {"dt_factor": sim["dt_factor"], "drag_law": sim["drag_law"]}
+    base = {"dt_factor": sim["dt_factor"], "drag_law": sim["drag_law"],
+            "residual_tol": NEWTON["residual_tol"]}  # fmt: skip
     out = {}
     for suite in ("coil", "serpentine"):
         mesh = MESH[suite]
         out[suite] = {"delta_bar": mesh["delta_bar"], "coarse_delta": mesh["coarse_delta"],
-                      **base, "initial_radius": mesh["initial_radius"]}  # fmt: skip
+                      "fine_length": mesh["fine_length"], **base,
+                      "initial_radius": mesh["initial_radius"]}  # fmt: skip
     out["serpentine"].update(sliding=sim["sliding"], phi=0.0, kappa_c_bar=DEFAULT_KAPPA_C,
                              tail_length=sim["tail_length"], vbar=None)  # fmt: skip
     return out
@@ -88,6 +90,7 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
 
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.sim.deposition import DepositionConfig, DepositionSim
+    from cnt_env.sim.stepper import NewtonOptions
     from cnt_env.units import paper_groups
 
     c = {**_suite_defaults()[suite], **CASES[suite][name]}
@@ -102,7 +105,8 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     config = DepositionConfig(
         params=paper_groups(suite, **groups), dt_factor=c["dt_factor"],
         initial_radius=c["initial_radius"], drag_law=c["drag_law"],
-        coarse_delta=c["coarse_delta"], **extra,
+        coarse_delta=c["coarse_delta"], fine_length=c["fine_length"],
+        newton=NewtonOptions(residual_tol=c["residual_tol"]), **extra,
     )  # fmt: skip
     sim = DepositionSim(config, seed=0)
     t0 = time.perf_counter()

@@ -21,9 +21,11 @@ __all__ = [
     "INITIAL_RADIUS",
     "MESH",
     "MODEL",
+    "NEWTON",
     "PRESETS",
     "RUN_DEPOSIT",
     "RUN_TRANSIENT",
+    "graded_coarse",
     "mesh_for",
 ]
 
@@ -43,15 +45,38 @@ MODEL: MappingProxyType[str, Any] = MappingProxyType({
 })  # fmt: skip
 
 #: Mesh and start-up arc per preset: one discretisation for both, delta = L_vb (the
-#: paper's delta ~ L_vb). With MODEL it gives R0 = 7.90 (+3.4%) on the coil; the linear
-#: drag law needs delta = 0.125 (graded) for 7.64, a mesh the serpentine cannot afford
-#: (RESULTS.md, issue 12).
+#: paper's delta ~ L_vb) where the rod bends, and a graded suspended rod above it: edges
+#: of ``coarse_delta`` = 4 L_vb are injected at the top and split to delta_bar within
+#: ``fine_length`` = 20 L_vb of the contact (RESULTS.md, issue 11 "graded mesh" and
+#: issue 12 "the graded mesh as the model's default": against the uniform rod the figures
+#: move by <= 1.2% at 0.4-0.6x the solved nodes). ``coarse_delta`` None is a uniform rod
+#: (``--coarse-delta 0`` on the command line). With MODEL it gives R0 = 7.9 (+3.4%) on
+#: the coil; the linear drag law needs delta = 0.125 for 7.64, a mesh the serpentine
+#: cannot afford (RESULTS.md, issue 12).
 MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
-    "coil": MappingProxyType({"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 6.4}),
+    "coil": MappingProxyType(
+        {"delta_bar": 1.0, "coarse_delta": 4.0, "fine_length": 20.0, "initial_radius": 6.4}
+    ),
     "serpentine": MappingProxyType(
-        {"delta_bar": 1.0, "coarse_delta": None, "initial_radius": 3.9}
+        {"delta_bar": 1.0, "coarse_delta": 4.0, "fine_length": 20.0, "initial_radius": 3.9}
     ),
 })  # fmt: skip
+
+#: Newton options of the model (``NewtonOptions`` fields): stop at a residual of 1e-5
+#: e_v instead of the stepper's generic 1e-8 (which is in its caller's force units). The
+#: traces move by < 1e-3 L_vb and the figures by < 2e-3 relative (RESULTS.md, issue 11,
+#: proposal 1; tests/test_stepper_speed_equivalence.py), for 15% fewer iterations.
+NEWTON: MappingProxyType[str, Any] = MappingProxyType({"residual_tol": 1e-5})
+
+
+def graded_coarse(coarse_delta: float | None, delta_bar: float) -> float | None:
+    """The preset's ``coarse_delta`` for a rod at ``delta_bar``: snapped to a whole
+    multiple of delta_bar, None (a uniform rod) when that is below 2 delta_bar."""
+    if coarse_delta is None:
+        return None
+    n_fine = round(coarse_delta / delta_bar)  # fine edges per coarse one
+    return n_fine * delta_bar if n_fine >= 2 else None
+
 
 #: Start-up contact arc radius R_i by substrate (~0.5 um: 6.4 L_vb flat, 3.9 stepped),
 #: used when ``--substrate`` swaps the preset's substrate.
@@ -70,32 +95,16 @@ RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 300.0, "
 #: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
 DEMO_DEPOSIT: float = 300.0
 
-#: Simulator settings of the env, for speed, by substrate (RESULTS.md, issue 11, "graded
-#: mesh"; ``benchmarks/graded_mesh.py``):
-#:
-#: * both: a graded suspended rod, edges of 4 L_vb injected at the top and split to
-#:   delta_bar within 20 L_vb of the contact (``coarse_delta``, ``fine_length``; snapped
-#:   to a whole multiple of delta_bar, uniform when that is below 2 delta_bar). Against
-#:   the uniform rod: coil R0 -0.3%, serpentine A within +1.2% and lambda within 0.2% at
-#:   vbar = 0.019-0.12, at half the solved nodes (1.8-2.7x the L_vb per CPU-second).
-#: * stepped: 4x the validated step and 60 L_vb of deposited tail kept in the solve
-#:   instead of 195 (serpentine suite, case env_fast). Validated for the issue-4 model
-#:   (linear, sliding B: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb
-#:   tail alone moves A and lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12
-#:   (RESULTS.md, issue 12). On the flat substrate the step stays the validated one: 4x
-#:   moves R0 by +6.6%.
-#: * both: Newton stops at a residual of 1e-5 e_v instead of 1e-8 (the traces move by
-#:   < 1e-3 L_vb over 120-150 L_vb, the figures by < 1e-4 relative:
-#:   tests/test_stepper_speed_equivalence.py), 1.07-1.10x on the serpentine env.
-_ENV_NEWTON = MappingProxyType({"residual_tol": 1e-5})  # NewtonOptions fields
+#: The env's speed settings on the stepped substrate, on top of the model (RESULTS.md,
+#: issue 11): 4x the validated step and 60 L_vb of deposited tail kept in the solve
+#: instead of 195 (serpentine suite, case env_fast). Validated for the issue-4 model
+#: (linear, sliding B: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb tail
+#: alone moves A and lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12, and the 4x
+#: step by up to +8.5% (RESULTS.md, issue 12). On the flat substrate the env runs the
+#: model as it is: 4x the step moves R0 by +6.6%.
 ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
-    "flat": MappingProxyType(
-        {"coarse_delta": 4.0, "fine_length": 20.0, "newton": _ENV_NEWTON}
-    ),
-    "stepped": MappingProxyType({
-        "dt_factor": 0.2, "tail_length": 60.0, "coarse_delta": 4.0, "fine_length": 20.0,
-        "newton": _ENV_NEWTON,
-    }),
+    "flat": MappingProxyType({}),
+    "stepped": MappingProxyType({"dt_factor": 0.2, "tail_length": 60.0}),
 })  # fmt: skip
 
 assert set(MESH) == set(PRESETS) == set(RUN_DEPOSIT) == set(RUN_TRANSIENT)

@@ -35,6 +35,7 @@ from cnt_env.presets import (
     MODEL,
     RUN_DEPOSIT,
     RUN_TRANSIENT,
+    graded_coarse,
 )
 
 if TYPE_CHECKING:
@@ -247,7 +248,9 @@ class RunOptions:
     ``groups`` maps DimensionlessParams fields (``Hbar``, ``Ibar``, ``vbar``, ``phi``,
     ``kappa_c_bar``, ``delta_bar``) to values, ``si`` PhysicalParams fields (``k_b``,
     ``e_v``, ``rho``, ``mu``, ``H``, ``v``); ``extra_groups`` sets any other field after
-    the mesh is chosen (a sweep's swept groups).
+    the mesh is chosen (a sweep's swept groups). ``coarse_delta`` None and ``fine_length``
+    None take the preset's graded rod (``presets.MESH``); ``coarse_delta`` 0 is a uniform
+    rod at delta_bar.
     """
 
     preset: str = "coil"
@@ -262,7 +265,7 @@ class RunOptions:
     drag_law: str = MODEL["drag_law"]
     sliding: str = MODEL["sliding"]
     coarse_delta: float | None = None
-    fine_length: float = 20.0
+    fine_length: float | None = None
     contact_mode: str = "event"
     initial_radius: float | None = None
     limits: Limits = field(default_factory=Limits)
@@ -295,6 +298,7 @@ class RunSpec:
             "sliding": c.sliding,
             "coarse_delta": c.coarse_delta,
             "fine_length": c.fine_length,
+            "residual_tol": c.newton.residual_tol,
             "contact_mode": c.contact.mode,
             "seed": self.seed,
             "initial_radius": c.initial_radius,
@@ -360,14 +364,16 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
     try:
         if groups.get("delta_bar") is None:  # the preset's validated mesh
             params = dataclasses.replace(params, delta_bar=mesh["delta_bar"])
-        coarse = opts.coarse_delta
-        if coarse is None and groups.get("delta_bar") is None:
-            coarse = mesh["coarse_delta"]
         radius = opts.initial_radius
         if radius is None:
             radius = INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         if opts.extra_groups:
             params = dataclasses.replace(params, **opts.extra_groups)
+        coarse = opts.coarse_delta  # None: the preset's graded rod; 0: uniform
+        if coarse is None:
+            coarse = graded_coarse(mesh["coarse_delta"], params.delta_bar)
+        elif coarse == 0:
+            coarse = None
     except (ValueError, TypeError) as exc:
         raise invalid(exc) from exc
     check_group_range(params)  # before the config's node-count guard, to name the flag
@@ -375,7 +381,8 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,
             contact=ContactOptions(mode=opts.contact_mode), initial_radius=radius,
-            sliding=opts.sliding, coarse_delta=coarse, fine_length=opts.fine_length,
+            sliding=opts.sliding, coarse_delta=coarse,
+            fine_length=mesh["fine_length"] if opts.fine_length is None else opts.fine_length,
         )  # fmt: skip
     except (ValueError, TypeError) as exc:
         raise invalid(exc) from exc

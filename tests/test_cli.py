@@ -424,6 +424,13 @@ def test_run_config_file_round_trips_and_flags_win(tmp_path: Path) -> None:
     a, b = load_trace(first), load_trace(again)
     np.testing.assert_array_equal(a["trace"], b["trace"])
     assert a["config"] == b["config"] and a["params"] == b["params"]
+    assert a["config"]["coarse_delta"] == 4.0  # the preset's graded rod
+    uniform = tmp_path / "u.npz"  # a uniform rod (coarse_delta None) stays uniform
+    assert _call([*argv, "--coarse-delta", "0", "--out", str(uniform)])[0] == 0
+    assert _call(["run", "--config", f"{uniform}.json", "--out", str(again)])[0] == 0
+    u, b = load_trace(uniform), load_trace(again)
+    assert u["config"]["coarse_delta"] is None and u["config"] == b["config"]
+    np.testing.assert_array_equal(u["trace"], b["trace"])
     flat = tmp_path / "c.yaml"  # flag names as keys; a flag on the command line wins
     flat.write_text("preset: serpentine\nvbar: 0.05\nseed: 3\ndeposit: 5\nHbar: 40\n"
                     "transient: 0\ndelta: 1\n")  # fmt: skip

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -108,9 +109,29 @@ def test_simulate_runs_the_spec_under_its_limits_and_measures() -> None:
 
 
 def test_estimated_nodes_counts_rod_and_trace() -> None:
-    spec = runs.resolve_run("serpentine", deposit=100.0)
-    n = runs.estimated_nodes(spec.sim_config, spec.deposit_length)
-    assert spec.params.Hbar + 100.0 < n < 2 * (spec.params.Hbar + 100.0) + 50
+    graded = runs.resolve_run("serpentine", deposit=100.0)  # the preset's graded rod
+    uniform = runs.resolve_run("serpentine", deposit=100.0, coarse_delta=0.0)
+    assert uniform.sim_config.coarse_delta is None and graded.sim_config.coarse_delta == 4.0
+    H = graded.params.Hbar
+    # the start-up quarter arc (R_i = 3.9), the fine 20 L_vb, the rest of Hbar, the trace
+    assert runs.estimated_nodes(uniform.sim_config, 100.0) == int(
+        0.5 * math.pi * 3.9 + 20 + H + 100) + 4  # fmt: skip
+    assert runs.estimated_nodes(graded.sim_config, 100.0) == int(
+        0.5 * math.pi * 3.9 + 20 + H / 4 + 100) + 4  # fmt: skip
+
+
+def test_graded_mesh_follows_delta_and_zero_means_uniform() -> None:
+    """The preset's coarse edge (4 L_vb) is snapped to a whole multiple of delta_bar and
+    dropped when under 2 delta_bar; an explicit coarse_delta is kept as given."""
+    for delta, coarse in ((1.0, 4.0), (0.5, 4.0), (1.5, 4.5), (0.3, 3.9)):
+        spec = runs.resolve_run("serpentine", groups={"delta_bar": delta}, deposit=10.0)
+        assert spec.sim_config.coarse_delta == (None if coarse is None else pytest.approx(coarse))
+        assert presets.graded_coarse(4.0, delta) == spec.sim_config.coarse_delta
+    assert presets.graded_coarse(4.0, 2.5) == 5.0 and presets.graded_coarse(4.0, 3.0) is None
+    assert runs.resolve_run("coil", coarse_delta=2.0).sim_config.coarse_delta == 2.0
+    assert runs.resolve_run("coil", fine_length=10.0).sim_config.fine_length == 10.0
+    with pytest.raises(runs.RunInputError, match="coarse_delta"):
+        runs.resolve_run("coil", coarse_delta=1.5)
 
 
 def test_check_number_is_the_one_validator() -> None:

@@ -34,7 +34,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from cnt_env.io import package_version, to_jsonable
-from cnt_env.presets import MODEL
+from cnt_env.presets import MESH, MODEL
 from cnt_env.runs import CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
 
 PROG = "cnt-sim"
@@ -189,13 +189,16 @@ def add_model_arguments(m: Any) -> None:
         "--coarse-delta",
         type=float,
         default=None,
-        help="graded mesh: inject edges of this length, split near the contact",
+        help="graded mesh: inject edges of this length, split near the contact; 0 for a "
+        f"uniform rod (default: {MESH['serpentine']['coarse_delta']:g}, snapped to a "
+        "whole multiple of --delta)",
     )
     m.add_argument(
         "--fine-length",
         type=float,
-        default=20.0,
-        help="graded mesh: arc length above the contact kept at --delta",
+        default=None,
+        help="graded mesh: arc length above the contact kept at --delta (default: "
+        f"{MESH['serpentine']['fine_length']:g})",
     )
     m.add_argument("--contact-mode", choices=CONTACT_MODES, default="event")
     m.add_argument(

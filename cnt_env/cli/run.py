@@ -279,6 +279,8 @@ def load_run_config(path: str) -> dict[str, Any]:
     if isinstance(data.get("config"), dict):  # a run's <out>.json
         saved, params = data["config"], data.get("params") or {}
         flat = {k: v for k, v in saved.items() if k in CONFIG_KEYS}
+        if "coarse_delta" in saved and saved["coarse_delta"] is None:
+            flat["coarse_delta"] = 0.0  # the run was uniform: keep it so (0 = uniform)
         if saved.get("dt_factor") is not None:  # dt came from the default factor, not --dt
             flat.pop("dt", None)
         si = saved.get("si")

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from cnt_env.presets import MODEL
+from cnt_env.presets import MODEL, NEWTON
 from cnt_env.sim.forces import (
     VDW_BETA0,
     VDW_CLAMP,
@@ -82,7 +82,9 @@ class DepositionConfig:
     Graded discretisation [choice, docs/model.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
     come within ``fine_length`` (arc length) of the contact node, where the curvature
-    lives. ``None`` keeps the rod uniform at ``delta_bar``.
+    lives. ``None`` keeps the rod uniform at ``delta_bar``; ``default_config``, ``cnt-sim``
+    and the env take the graded rod of ``presets.MESH``. ``newton`` defaults to
+    ``presets.NEWTON`` (residual 1e-5 e_v).
     ``dt`` defaults to ``dt_factor * Hbar``: the time to deposit ``dt_factor`` L_vb at the
     speed scale 1/Hbar, whatever delta (the dynamics near the contact are set by L_vb, not
     by delta; touchdowns are located inside a step by the event search). ``initial_radius``
@@ -108,7 +110,7 @@ class DepositionConfig:
     max_nodes: int = 200_000
     tail_clamp: str = MODEL["tail_clamp"]
     contact: ContactOptions = field(default_factory=ContactOptions)
-    newton: NewtonOptions = field(default_factory=NewtonOptions)
+    newton: NewtonOptions = field(default_factory=lambda: NewtonOptions(**NEWTON))
 
     def __post_init__(self) -> None:
         if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
@@ -580,10 +582,11 @@ def initial_shape(
 def default_config(preset: str, **changes) -> DepositionConfig:
     """The validated configuration of a preset (``units.paper_groups`` groups, mesh and
     start-up from ``presets.MESH``); ``changes`` go to DimensionlessParams fields or
-    DepositionConfig fields, by name."""
+    DepositionConfig fields, by name. The preset's graded mesh follows a changed
+    ``delta_bar`` (``presets.graded_coarse``); ``coarse_delta=None`` makes the rod uniform."""
     from dataclasses import fields
 
-    from cnt_env.presets import mesh_for
+    from cnt_env.presets import graded_coarse, mesh_for
     from cnt_env.units import paper_groups
 
     d = mesh_for(preset)
@@ -591,12 +594,8 @@ def default_config(preset: str, **changes) -> DepositionConfig:
     groups = {k: v for k, v in changes.items() if k in param_names}
     rest = {k: v for k, v in changes.items() if k not in param_names}
     params = paper_groups(preset, **{"delta_bar": d["delta_bar"], **groups})
-    coarse = rest.pop("coarse_delta", d["coarse_delta"])
-    if coarse is not None and coarse < params.delta_bar:
-        coarse = None  # a mesh coarser than the graded one's top: uniform
-    return DepositionConfig(
-        params=params,
-        coarse_delta=coarse,
-        initial_radius=rest.pop("initial_radius", d["initial_radius"]),
-        **rest,
-    )
+    if "coarse_delta" not in rest:
+        rest["coarse_delta"] = graded_coarse(d["coarse_delta"], params.delta_bar)
+    rest.setdefault("fine_length", d["fine_length"])
+    rest.setdefault("initial_radius", d["initial_radius"])
+    return DepositionConfig(params=params, **rest)

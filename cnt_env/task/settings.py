@@ -13,7 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from cnt_env.presets import DEFAULT_KAPPA_C, ENV_SIM_DEFAULTS, mesh_for
+from cnt_env.presets import (
+    DEFAULT_KAPPA_C,
+    ENV_SIM_DEFAULTS,
+    NEWTON,
+    graded_coarse,
+    mesh_for,
+)
 from cnt_env.sim.deposition import DepositionConfig
 from cnt_env.sim.stepper import NewtonOptions
 from cnt_env.units import DimensionlessParams, paper_groups
@@ -151,19 +157,22 @@ def deposition_config(
     sim_options: Mapping[str, Any] | None,
     **explicit: float | None,
 ) -> DepositionConfig:
-    """The simulator config: the preset's validated start-up radius, then the env's speed
-    settings (``ENV_SIM_DEFAULTS`` of the substrate; its graded mesh, which replaces the
-    preset's, snapped to a whole multiple of delta_bar), then ``sim_options``, then the
-    ``explicit`` keywords that are not None (dt, coarse_delta, initial_radius)."""
-    cfg: dict[str, Any] = {"initial_radius": mesh_for(preset)["initial_radius"]}
+    """The simulator config: the preset's mesh and start-up radius (``presets.MESH``, the
+    graded rod snapped to a whole multiple of delta_bar), then the env's speed settings
+    (``ENV_SIM_DEFAULTS`` of the substrate), then ``sim_options``, then the ``explicit``
+    keywords that are not None (dt, coarse_delta, initial_radius)."""
+    mesh = mesh_for(preset)
+    cfg: dict[str, Any] = {
+        "initial_radius": mesh["initial_radius"],
+        "coarse_delta": graded_coarse(mesh["coarse_delta"], params.delta_bar),
+        "fine_length": mesh["fine_length"],
+    }
     cfg.update(ENV_SIM_DEFAULTS["flat" if params.kappa_c_bar is None else "stepped"])
-    n_fine = round(cfg["coarse_delta"] / params.delta_bar)  # fine edges per coarse one
-    cfg["coarse_delta"] = n_fine * params.delta_bar if n_fine >= 2 else None
     cfg.update(mapping_or_none("sim_options", sim_options))
     cfg.update({k: v for k, v in explicit.items() if v is not None})
-    if isinstance(cfg.get("newton"), Mapping):  # NewtonOptions fields, as in the defaults
+    if isinstance(cfg.get("newton"), Mapping):  # NewtonOptions fields over the model's
         try:
-            cfg["newton"] = NewtonOptions(**cfg["newton"])
+            cfg["newton"] = NewtonOptions(**{**NEWTON, **cfg["newton"]})
         except TypeError as exc:
             raise ValueError(f"sim_options['newton']: {exc}") from exc
     try:
