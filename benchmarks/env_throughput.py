@@ -17,7 +17,7 @@ by default) it measures, in one process with one thread:
 ``--previous`` adds the same measurement of each preset with the env's settings before
 round 3 (a uniform suspended rod and the Newton tolerance 1e-8: ``sim_options=
 {"coarse_delta": None, "newton": NewtonOptions()}``, against the graded rod and 1e-5 of
-``presets.ENV_SIM_DEFAULTS``) and the ratio of the two figures of merit. ``--baseline N``
+``presets.MESH`` and ``presets.NEWTON``) and the ratio of the two figures of merit. ``--baseline N``
 also runs N control steps of the paper's constant flow (v̄ = 0.037 along +x) and
 measures the serpentine it lays, which sets the episode length (max_episode_steps).
 Prints one JSON object.

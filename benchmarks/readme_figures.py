@@ -3,8 +3,7 @@
     python benchmarks/readme_figures.py        # writes docs/serpentines.png
 
 No simulation: it plots ``benchmarks/results/reproduce/traces`` (the default
-configuration, dt_factor 0.05, 1500 L_vb per point) and one φ point of the
-configuration study (``config_study/traces``, dt_factor 0.2), the last ``--window``
+configuration, dt_factor 0.05, 1500 L_vb per point), the last ``--window``
 L_vb of each, with the amplitude and wavelength that ``cnt_env.patterns`` measures on
 the whole trace (the numbers of ``benchmarks/RESULTS.md``, issue 12).
 """
@@ -21,14 +20,15 @@ from cnt_env.plotting.topview import lvb_in_um
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
+_MESH = "coarse=4_fine=20_tol=1e-05"  # the model's mesh and tolerance (presets)
 PANELS = (
-    ("reproduce/traces/default__serpentine__vbar=0.005.npy", "v̄ = 0.005, φ = 0"),
-    ("reproduce/traces/default__serpentine__vbar=0.037.npy", "v̄ = 0.037, φ = 0 (baseline)"),
-    ("reproduce/traces/default__serpentine__vbar=0.12.npy", "v̄ = 0.12, φ = 0"),
+    (f"reproduce/traces/default__serpentine__vbar=0.005__{_MESH}.npy", "v̄ = 0.005, φ = 0"),
     (
-        "config_study/traces/printed_C__serpentine__phi=0.87__dt=0.2.npy",
-        "v̄ = 0.037, φ = 0.87 (Δt x4)",
+        f"reproduce/traces/default__serpentine__vbar=0.037__{_MESH}.npy",
+        "v̄ = 0.037, φ = 0 (baseline)",
     ),
+    (f"reproduce/traces/default__serpentine__vbar=0.12__{_MESH}.npy", "v̄ = 0.12, φ = 0"),
+    (f"reproduce/traces/default__serpentine__phi=0.87__{_MESH}.npy", "v̄ = 0.037, φ = 0.87"),
 )
 
 

@@ -67,6 +67,14 @@ SERPENTINE_CASES: dict[str, dict] = {
     "dt_0.2": {"dt_factor": 0.2},
     # the env's faster configuration: 4x the step, 60 L_vb of deposited tail in the solve
     "env_fast": {"dt_factor": 0.2, "tail_length": 60.0},
+    # the solved deposited tail (default 195 L_vb = 25 um) shorter and longer, at the ends
+    # of the flow range: is 195 converged, and what does a shorter (faster) tail cost?
+    **{f"tail_{t:g}": {"tail_length": t} for t in (100.0, 300.0)},
+    **{
+        f"vbar_{v:g}_tail_{t:g}": {"vbar": v, "tail_length": t}
+        for v in (0.019, 0.12)
+        for t in (100.0, 300.0)
+    },
 }
 
 # name -> overrides of the coil suite's defaults (_suite_defaults)

@@ -456,6 +456,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         "coverage": 0.0,
         "loose_coverage": 0.0,
         "turn_sign_fraction": math.nan,
+        "radius_windows": "strict",
     }
     if not math.isfinite(window) or window > total:
         return result
@@ -509,6 +510,14 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         l_starts = starts[loose]
         covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
         result["loose_coverage"] = min(1.0, covered / total)
+        if not radii.size:  # a coil that never closes within 5% (a precessing rosette):
+            # its radius and class come from the loose windows, and say so
+            loose_radii = radius[loose]
+            result["median"] = _median(loose_radii)
+            result["spread"] = _spread(loose_radii)
+            signs = np.sign(turning[loose])
+            result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+            result["radius_windows"] = "loose"
     return result
 
 
@@ -526,7 +535,11 @@ def coil_radius(trace: ArrayLike, options: MeasureOptions | None = None) -> dict
     Returns ``median`` (NaN if no window is accepted), ``spread`` = (p16, p84) of
     the accepted radii, ``n_windows`` (fitted), ``n_rejected``, ``radii``
     (accepted, in trace order), ``window_length``, ``coverage`` (fraction of the
-    measured arc length inside accepted windows) and ``turn_sign_fraction``.
+    measured arc length inside accepted windows) and ``turn_sign_fraction``. When no
+    window is accepted but some are one turn within ``coil_loose_rel_residual`` (a coil
+    that precesses, a rosette), ``median``, ``spread`` and ``turn_sign_fraction`` come
+    from those loose windows and ``radius_windows`` says ``"loose"`` (else
+    ``"strict"``); ``loose_coverage`` is their coverage.
     """
     options = _options(options)
     return _coil(_prepare(trace, options), options)
@@ -945,7 +958,9 @@ def measure(
     (:func:`serpentine_measures`). Absent values are ``float('nan')``; spreads are
     ``[p16, p84]`` lists. Keys: ``pattern``, ``substrate``, ``measured_length``,
     ``transient_length``, ``n_points``, ``coil_radius``, ``coil_radius_spread``,
-    ``coil_n_windows``, ``coil_n_rejected``, ``coil_coverage``, ``amplitude``,
+    ``coil_n_windows``, ``coil_n_rejected``, ``coil_coverage``, ``coil_loose_coverage``,
+    ``coil_radius_windows`` (``"strict"``, or ``"loose"`` when no window closes within
+    ``coil_max_rel_residual`` and the radius is the loose windows'), ``amplitude``,
     ``amplitude_spread``, ``amplitude_cv``, ``wavelength``, ``wavelength_spread``,
     ``wavelength_cv``, ``wavelength_progression`` (same-side U-turn spacing along
     the trace's own direction of progression, ``progression_direction``; with the
@@ -974,12 +989,16 @@ def measure(
         "measured_length": length,
         "transient_length": float(options.transient_length),
         "n_points": int(m.points.shape[0]),
-        "coil_radius": float(coil["median"]),
+        # a loose (rosette) radius only where the trace is a coil
+        "coil_radius": float(coil["median"])
+        if coil["radius_windows"] == "strict" or pattern == "coil"
+        else math.nan,
         "coil_radius_spread": [float(v) for v in coil["spread"]],
         "coil_n_windows": int(coil["n_windows"]),
         "coil_n_rejected": int(coil["n_rejected"]),
         "coil_coverage": float(coil["coverage"]),
         "coil_loose_coverage": float(coil["loose_coverage"]),
+        "coil_radius_windows": coil["radius_windows"],
         "amplitude": float(serp["amplitude"]),
         "peak_to_peak": float(serp["peak_to_peak"]),
         "amplitude_spread": [float(v) for v in serp["amplitude_spread"]],
@@ -1016,7 +1035,8 @@ def classify(
     3. ``"coil"``: windows that are one turn of a circle with a residual up to
        ``coil_loose_rel_residual`` (a loose, drifting coil counts) cover at least
        ``coil_min_coverage`` of the measured arc length; the accepted windows
-       (:func:`coil_radius`) have a relative spread
+       (:func:`coil_radius`; the loose ones when none is accepted: a rosette) have a
+       relative spread
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
        ``coil_min_turn_sign_fraction`` of them turn the same way.
     4. On the ``"stepped"`` substrate, with at least two U-turns:

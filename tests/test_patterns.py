@@ -188,6 +188,23 @@ def test_coil_radius_and_class() -> None:
     assert result["coil_radius"] == pytest.approx(R0_BAR, rel=COIL_RADIUS_REL)
 
 
+@pytest.mark.parametrize("rho, rate", [(3.0, -0.3), (2.5, -0.5)])
+def test_precessing_coil_is_a_coil_from_its_loose_windows(rho: float, rate: float) -> None:
+    """A rosette: a circle of radius 9 whose centre runs backwards round a circle of
+    radius rho (the coil at Hbar = 150 lays one after ~1000 L_vb). No window closes
+    within 5% of the radius, all within 25%: a coil, its radius from the loose windows
+    (within 3% of 9) and flagged so; the strict rule alone called it unknown."""
+    phase = np.arange(0.0, 3000.0 / 9.0, 0.5 / 9.0)
+    centre = rho * np.stack([np.cos(rate * phase), np.sin(rate * phase)], axis=1)
+    trace = centre + 9.0 * np.stack([np.cos(phase), np.sin(phase)], axis=1)
+    result = measure(trace)
+    assert result["coil_coverage"] == 0.0 and result["coil_loose_coverage"] > 0.95
+    assert result["pattern"] == "coil" and result["coil_radius_windows"] == "loose"
+    assert result["coil_radius"] == pytest.approx(9.0, rel=0.03)
+    clean = measure(coil_trace(3000.0))
+    assert clean["coil_radius_windows"] == "strict"
+
+
 def test_coil_radius_of_other_radius_and_finer_spacing() -> None:
     trace = coil_trace(4000.0, radius=20.0, spacing=0.25, seed=3)
     assert coil_radius(trace)["median"] == pytest.approx(20.0, rel=COIL_RADIUS_REL)

@@ -206,7 +206,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
     | `dt`               | 0.2 H̄ ...    | physics time step (tau); ENV_SIM_DEFAULTS       |
-    | `coarse_delta`     | 4.0          | graded mesh (DepositionConfig); ENV_SIM_DEFAULTS|
+    | `coarse_delta`     | 4.0          | graded mesh (DepositionConfig); presets.MESH    |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
@@ -242,7 +242,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     * v0, revision 3 (simulator speed): the suspended rod is graded (``coarse_delta`` 4,
       ``fine_length`` 20) and Newton stops at 1e-5 e_v, on both substrates
-      (``presets.ENV_SIM_DEFAULTS``): ~2x (stepped) and ~3.7x (flat) the trace per
+      (now the model's own defaults, ``presets.MESH`` and ``presets.NEWTON``; this note
+      keeps its history): ~2x (stepped) and ~3.7x (flat) the trace per
       CPU-second, pattern figures within ~1%; rollouts differ from revision 2's.
       ``sim_options={"coarse_delta": None, "newton": {"residual_tol": 1e-8}}`` gives
       revision 2's simulator.
