@@ -114,7 +114,7 @@ def force_and_hessian(
     if "bend_twist" in parts:
         elastic.add_bend_twist(
             q, n_nodes, s["m1"], s["m2"], s["twist"], voronoi(rest), k_b, k_t, force, ab, True,
-            frozen.tangents, transport,
+            frozen.tangents, transport, np.zeros(0, dtype=np.uint8),
         )  # fmt: skip
     dense = np.zeros((n_dof, n_dof))
     for i in range(n_dof):

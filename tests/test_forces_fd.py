@@ -9,6 +9,8 @@ from cnt_env.rod.banded import KL, KU, LDAB
 from cnt_env.sim.forces import add_linear_drag, add_printed_drag, add_vdw
 from tests.rodkit import random_rod
 
+NO_FIXED = np.zeros(0, dtype=np.uint8)  # every Jacobian entry assembled
+
 H_FD = 1e-7
 JAC_RTOL = 1e-6
 
@@ -25,7 +27,7 @@ def _force_and_jac(kernel, q, q_old, rest, dt, flow, drag_on):
     n_nodes = (q.size + 1) // 4
     f = np.zeros(q.size)
     ab = np.zeros((LDAB, q.size))
-    kernel(q, q_old, dt, n_nodes, rest, drag_on, flow, 1.3, 1.0, 2.29, f, ab, True)
+    kernel(q, q_old, dt, n_nodes, rest, drag_on, flow, 1.3, 1.0, 2.29, f, ab, True, NO_FIXED)
     return f, _dense(ab, q.size)
 
 
@@ -77,8 +79,9 @@ def test_printed_law_matches_linear_for_axial_and_normal_motion() -> None:
     for flow in (np.array([0.4, 0.0, 0.0]), np.array([0.0, 0.0, -0.4])):
         f_lin, f_pr = np.zeros(7), np.zeros(7)
         ab = np.zeros((LDAB, 7))
-        add_linear_drag(q, q, 1.0, n_nodes, rest, on, flow, 1.3, 1.0, 2.29, f_lin, ab, False)
-        add_printed_drag(q, q, 1.0, n_nodes, rest, on, flow, 1.3, 1.0, 2.29, f_pr, ab, False)
+        args = (rest, on, flow, 1.3, 1.0, 2.29)
+        add_linear_drag(q, q, 1.0, n_nodes, *args, f_lin, ab, False, NO_FIXED)
+        add_printed_drag(q, q, 1.0, n_nodes, *args, f_pr, ab, False, NO_FIXED)
         np.testing.assert_allclose(f_pr, f_lin, rtol=1e-12, atol=1e-15)
 
 

@@ -116,3 +116,51 @@ def test_exact_jacobian_changes_only_the_newton_path() -> None:
     assert np.max(np.abs(a - b)) < 1e-7
     assert runs[True].rod.steps == runs[False].rod.steps
     assert runs[True].rod.newton_iterations <= runs[False].rod.newton_iterations
+
+
+def test_z_only_stencils_assemble_the_same_matrix() -> None:
+    """The bend-twist and drag assemblies skip, on stencils and edges whose only free DOFs
+    are the nodes' z (the snapped deposited tail of the stepped substrate), the Jacobian
+    entries that the fixed rows and columns discard (elastic._bend_twist_zz,
+    forces._z_only_edge): after band_fix_dof the band equals the full assembly's bit for
+    bit, and the force is untouched."""
+    from cnt_env.rod import elastic
+    from cnt_env.rod.banded import LDAB, band_fix_dof
+    from cnt_env.sim.forces import add_linear_drag, add_printed_drag
+
+    sim = DepositionSim(_small("serpentine", NewtonOptions()), seed=7)
+    sim.run(100.0)
+    rod = sim.rod
+    rod.elastic_energy()  # frames and strains of the current state
+    n, nd, m, d = rod.n_nodes, rod.n_dof, rod.material, rod.drag
+    fixed = np.asarray(rod.fixed[:nd])
+    z_only = [i for i in range(1, n - 1)
+              if all(fixed[4 * (i - 1) + a] for a in range(11) if a % 4 != 2)]  # fmt: skip
+    assert len(z_only) >= 10  # the path is exercised
+    q_old = rod.q - sim.dt * rod.u  # any earlier state: the drag sees a velocity
+    flow = np.array([0.02, 0.0, 0.01])
+
+    def bend_twist(mask, force, ab):
+        elastic.add_bend_twist(rod.q, n, rod._m1, rod._m2, rod._twist, rod.voronoi_lengths,
+                               m.k_b, m.k_t, force, ab, True, rod.tangents_old, False,
+                               mask)  # fmt: skip
+
+    def drag(kernel):
+        def run(mask, force, ab):
+            kernel(rod.q, q_old, sim.dt, n, rod.rest_lengths, rod.drag_on, flow, d.mu,
+                   d.sigma, d.c_sigma, force, ab, True, mask)  # fmt: skip
+
+        return run
+
+    for name, assemble in (("bend_twist", bend_twist), ("printed", drag(add_printed_drag)),
+                           ("linear", drag(add_linear_drag))):  # fmt: skip
+        out = {}
+        for key, mask in (("skip", rod.fixed), ("full", np.zeros(0, dtype=np.uint8))):
+            force, ab = np.zeros(nd), np.zeros((LDAB, nd))
+            assemble(mask, force, ab)
+            for k in np.flatnonzero(fixed):
+                band_fix_dof(ab, nd, int(k))
+            out[key] = (force, ab)
+        np.testing.assert_array_equal(out["skip"][0], out["full"][0], err_msg=name)
+        np.testing.assert_array_equal(out["skip"][1], out["full"][1], err_msg=name)
+        assert np.count_nonzero(out["full"][1]) > nd, name  # a real Jacobian

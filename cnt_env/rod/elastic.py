@@ -136,6 +136,91 @@ def _vec(a: np.ndarray) -> tuple:
     return (a[0], a[1], a[2])
 
 
+@njit(cache=True, inline="always")
+def _d2_ee(w: float, ine2: float, kap: float, sgn: float, ichi: float, tt: tuple, tmp: tuple,
+           te: tuple, kb: tuple, mfe: tuple, k: int, m: int) -> float:  # fmt: skip
+    """cb kappa_c d2kappa_c/de_k de_m without its diagonal term (primer; c = 1, 2)."""
+    return (
+        w
+        * ine2
+        * (
+            2.0 * kap * (tt[k] * tt[m])
+            - sgn * (tmp[k] * tt[m] + tt[k] * tmp[m])
+            + kap * ichi * te[k] * te[m]
+            + 0.25 * sgn * (kb[k] * mfe[m] + mfe[k] * kb[m])
+        )
+    )
+
+
+@njit(cache=True, inline="always")
+def _d2_ff(w: float, inf2: float, kap: float, sgn: float, ichi: float, tt: tuple, tmp2: tuple,
+           tf: tuple, kb: tuple, mff: tuple, k: int, m: int) -> float:  # fmt: skip
+    """cb kappa_c d2kappa_c/df_k df_m without its diagonal term."""
+    return (
+        w
+        * inf2
+        * (
+            2.0 * kap * (tt[k] * tt[m])
+            + sgn * (tmp2[k] * tt[m] + tt[k] * tmp2[m])
+            + kap * ichi * tf[k] * tf[m]
+            + 0.25 * sgn * (kb[k] * mff[m] + mff[k] * kb[m])
+        )
+    )
+
+
+@njit(cache=True, inline="always")
+def _d2_ef(w: float, inef: float, kap: float, sgn: float, ichi: float, tt: tuple, tmp: tuple,
+           tmp2: tuple, te: tuple, tf: tuple, k: int, m: int) -> float:  # fmt: skip
+    """cb kappa_c d2kappa_c/de_k df_m without its diagonal and cross-product terms."""
+    return (
+        w
+        * inef
+        * (
+            -kap * ichi * te[k] * tf[m]
+            + 2.0 * kap * tt[k] * tt[m]
+            - sgn * tmp[k] * tt[m]
+            + sgn * tt[k] * tmp2[m]
+        )
+    )
+
+
+@njit(cache=True)
+def _bend_twist_zz(te: tuple, tf: tuple, tt: tuple, kb: tuple, ichi: float, ine: float,
+                   inf_: float, a1: tuple, b1: tuple, a2: tuple, b2: tuple, m1e: tuple,
+                   m2e: tuple, m1f: tuple, m2f: tuple, kappa1: float, kappa2: float,
+                   twist: float, cb: float, ct: float, h: np.ndarray, gk1: np.ndarray,
+                   gk2: np.ndarray, gtw: np.ndarray) -> None:  # fmt: skip
+    """h[2, 2], h[2, 5], h[5, 5] of :func:`_bend_twist_reduced`'s Hessian alone: the
+    terms of the full Hessian that land on them, in its order (so the same bits). A
+    stencil whose only free DOFs are the three nodes' z (a deposited, snapped stretch of
+    the stepped substrate's tail) needs no other entry: the rows and columns of fixed DOFs
+    are replaced by the identity (banded.band_fix_dof)."""
+    for a, b in ((2, 2), (2, 5), (5, 5)):
+        h[a, b] = cb * (gk1[a] * gk1[b] + gk2[a] * gk2[b]) + ct * gtw[a] * gtw[b]
+    ine2 = ine * ine
+    inf2 = inf_ * inf_
+    inef = ine * inf_
+    for pass_ in range(2):
+        if pass_ == 0:
+            kap, sgn, mfe, mff, tmp, tmp2 = kappa1, 1.0, m2e, m2f, a1, b1
+        else:
+            kap, sgn, mfe, mff, tmp, tmp2 = kappa2, -1.0, m1e, m1f, a2, b2
+        w = cb * kap
+        h[2, 2] += _d2_ee(w, ine2, kap, sgn, ichi, tt, tmp, te, kb, mfe, 2, 2)
+        h[5, 5] += _d2_ff(w, inf2, kap, sgn, ichi, tt, tmp2, tf, kb, mff, 2, 2)
+        h[2, 2] -= w * kap * ichi * ine2
+        h[5, 5] -= w * kap * ichi * inf2
+        h[2, 5] += _d2_ef(w, inef, kap, sgn, ichi, tt, tmp, tmp2, te, tf, 2, 2)
+        h[2, 5] -= w * kap * ichi * inef
+    w = ct * twist
+    u1 = (te[0] + tt[0], te[1] + tt[1], te[2] + tt[2])
+    u2 = (tf[0] + tt[0], tf[1] + tt[1], tf[2] + tt[2])
+    cc = 0.5 * w * inef
+    h[2, 2] -= 0.25 * w * ine2 * (kb[2] * u1[2] + u1[2] * kb[2])
+    h[5, 5] -= 0.25 * w * inf2 * (kb[2] * u2[2] + u2[2] * kb[2])
+    h[2, 5] -= cc * kb[2] * tt[2]
+
+
 @njit(cache=True)
 def _bend_twist_reduced(
     e: tuple,
@@ -154,12 +239,15 @@ def _bend_twist_reduced(
     gk2: np.ndarray,
     gtw: np.ndarray,
     with_hessian: bool,
+    zz_only: bool = False,
 ) -> None:
     """Gradient g (8) and Hessian h (8x8) of the bend+twist energy of one interior node
     in the reduced coordinates (e, f, theta_e, theta_f). gk1/gk2/gtw (8) are scratch.
     Only the upper triangle of h is filled (the Hessian is symmetric; the caller mirrors
     it). 3-vectors are tuples so that they live in registers: scratch arrays would alias
-    for LLVM and force reloads.
+    for LLVM and force reloads. ``zz_only``: only h[2, 2], h[2, 5] and h[5, 5] (the z
+    components of e and f), by the same operations in the same order as the full
+    Hessian, so with the same bits (the others are left as they were).
     """
     ne = math.sqrt(_dot(e, e))
     nf = math.sqrt(_dot(f, f))
@@ -204,6 +292,10 @@ def _bend_twist_reduced(
         g[a] = cb * (kappa1 * gk1[a] + kappa2 * gk2[a]) + ct * twist * gtw[a]
     if not with_hessian:
         return
+    if zz_only:
+        _bend_twist_zz(te, tf, tt, kb, ichi, ine, inf_, a1, b1, a2, b2, m1e, m2e, m1f, m2f,
+                       kappa1, kappa2, twist, cb, ct, h, gk1, gk2, gtw)  # fmt: skip
+        return
     for a in range(8):
         for b in range(a, 8):
             h[a, b] = cb * (gk1[a] * gk1[b] + gk2[a] * gk2[b]) + ct * gtw[a] * gtw[b]
@@ -226,43 +318,13 @@ def _bend_twist_reduced(
         w = cb * kap
         for k in range(3):
             for m in range(k, 3):
-                ttkm = tt[k] * tt[m]
-                # D2/De2
-                h[k, m] += (
-                    w
-                    * ine2
-                    * (
-                        2.0 * kap * ttkm
-                        - sgn * (tmp[k] * tt[m] + tt[k] * tmp[m])
-                        + kap * ichi * te[k] * te[m]
-                        + 0.25 * sgn * (kb[k] * mfe[m] + mfe[k] * kb[m])
-                    )
-                )
-                # D2/Df2
-                h[3 + k, 3 + m] += (
-                    w
-                    * inf2
-                    * (
-                        2.0 * kap * ttkm
-                        + sgn * (tmp2[k] * tt[m] + tt[k] * tmp2[m])
-                        + kap * ichi * tf[k] * tf[m]
-                        + 0.25 * sgn * (kb[k] * mff[m] + mff[k] * kb[m])
-                    )
-                )
+                h[k, m] += _d2_ee(w, ine2, kap, sgn, ichi, tt, tmp, te, kb, mfe, k, m)
+                h[3 + k, 3 + m] += _d2_ff(w, inf2, kap, sgn, ichi, tt, tmp2, tf, kb, mff, k, m)
             h[k, k] -= w * kap * ichi * ine2
             h[3 + k, 3 + k] -= w * kap * ichi * inf2
             # D2/DeDf (full off-diagonal block)
             for m in range(3):
-                h[k, 3 + m] += (
-                    w
-                    * inef
-                    * (
-                        -kap * ichi * te[k] * tf[m]
-                        + 2.0 * kap * tt[k] * tt[m]
-                        - sgn * tmp[k] * tt[m]
-                        + sgn * tt[k] * tmp2[m]
-                    )
-                )
+                h[k, 3 + m] += _d2_ef(w, inef, kap, sgn, ichi, tt, tmp, tmp2, te, tf, k, m)
             h[k, 3 + k] -= w * kap * ichi * inef
         # - sgn [tilde_d]_x / (|e||f|)
         cc = -w * sgn * inef
@@ -356,6 +418,17 @@ def _transport_terms(
         kx[o + 2, o + 1] += s * d[0]
 
 
+@njit(cache=True, inline="always")
+def _only_z_free(fixed: np.ndarray, a0: int) -> bool:
+    """Are all 11 DOFs of the stencil at a0 fixed except the three nodes' z (2, 6, 10)?"""
+    if fixed.size == 0:
+        return False
+    for a in range(11):
+        if a % 4 != 2 and not fixed[a0 + a]:
+            return False
+    return True
+
+
 @njit(cache=True)
 def add_bend_twist(
     q: np.ndarray,
@@ -371,13 +444,17 @@ def add_bend_twist(
     with_hessian: bool,
     tangents_old: np.ndarray,
     transport: bool,
+    fixed: np.ndarray,
 ) -> None:
     """Bending and twisting force -dE/dq and Jacobian over all interior nodes.
 
     With ``transport`` the Jacobian is that of the force as computed, frames
     time-parallel-transported from ``tangents_old`` (:func:`_transport_terms`); without
     it, the symmetric DER Hessian (Bergou 2010; the primer). The force is the same
-    either way."""
+    either way. ``fixed`` (n_dof, nonzero = fixed) lets a stencil whose only free DOFs
+    are its nodes' z skip the Hessian entries that the fixed rows and columns discard
+    (:func:`_bend_twist_zz`; the entries that remain have the same bits). Pass zeros to
+    assemble every entry (the caller's band_fix_dof must then not be relied on)."""
     g = np.empty(8)
     h = np.zeros((8, 8))
     gk1 = np.empty(8)
@@ -388,13 +465,32 @@ def add_bend_twist(
         a0 = 4 * (i - 1)
         e = (q[a0 + 4] - q[a0], q[a0 + 5] - q[a0 + 1], q[a0 + 6] - q[a0 + 2])
         f = (q[a0 + 8] - q[a0 + 4], q[a0 + 9] - q[a0 + 5], q[a0 + 10] - q[a0 + 6])
+        zz = with_hessian and not transport and _only_z_free(fixed, a0)
         _bend_twist_reduced(
             e, f, _vec(m1[i - 1]), _vec(m2[i - 1]), _vec(m1[i]), _vec(m2[i]), twist[i],
-            voronoi_lengths[i], k_b, k_t, g, h, gk1, gk2, gtw, with_hessian,
+            voronoi_lengths[i], k_b, k_t, g, h, gk1, gk2, gtw, with_hessian, zz,
         )  # fmt: skip
         for a in range(11):
             force[a0 + a] -= _R_SIGN[a, 0] * g[_R_INDEX[a, 0]] + _R_SIGN[a, 1] * g[_R_INDEX[a, 1]]
         if not with_hessian:
+            continue
+        if zz:  # the z-z entries of nodes i-1, i, i+1 (local DOFs 2, 6, 10) alone
+            h[5, 2] = h[2, 5]
+            for a in range(2, 11, 4):
+                ia0 = _R_INDEX[a, 0]
+                ia1 = _R_INDEX[a, 1]
+                sa0 = _R_SIGN[a, 0]
+                sa1 = _R_SIGN[a, 1]
+                for b in range(a, 11, 4):
+                    ib0 = _R_INDEX[b, 0]
+                    ib1 = _R_INDEX[b, 1]
+                    sb0 = _R_SIGN[b, 0]
+                    sb1 = _R_SIGN[b, 1]
+                    hab = (sa0 * (sb0 * h[ia0, ib0] + sb1 * h[ia0, ib1])
+                           + sa1 * (sb0 * h[ia1, ib0] + sb1 * h[ia1, ib1]))  # fmt: skip
+                    ab[_DIAG + a - b, a0 + b] += hab
+                    if b != a:
+                        ab[_DIAG + b - a, a0 + a] += hab
             continue
         for a in range(8):  # mirror the upper triangle
             for b in range(a):

@@ -60,6 +60,14 @@ def _edge_velocity_state(
     return ln
 
 
+@njit(cache=True, inline="always")
+def _z_only_edge(fixed: np.ndarray, a: int, b: int) -> bool:
+    """Are both nodes of the edge (DOFs a.., b..) fixed in x and y (only z free)? Then
+    the edge's Jacobian block matters on its z rows and columns alone: band_fix_dof
+    zeroes the others."""
+    return fixed.size > 0 and bool(fixed[a] and fixed[a + 1] and fixed[b] and fixed[b + 1])
+
+
 @njit(cache=True)
 def add_linear_drag(
     q: np.ndarray,
@@ -75,8 +83,13 @@ def add_linear_drag(
     force: np.ndarray,
     ab: np.ndarray,
     with_jacobian: bool,
+    fixed: np.ndarray,
 ) -> None:
-    """Linear anisotropic drag on every edge j with ``drag_on[j]`` (paper eq. 2, linear)."""
+    """Linear anisotropic drag on every edge j with ``drag_on[j]`` (paper eq. 2, linear).
+
+    ``fixed`` (n_dof; empty: none): an edge whose nodes are fixed in x and y gets only its
+    z-z Jacobian entries (the others are discarded with the fixed rows and columns;
+    the same bits, :func:`_z_only_edge`)."""
     t = np.empty(3)
     vr = np.empty(3)
     fe = np.empty(3)
@@ -98,8 +111,9 @@ def add_linear_drag(
         # geometric part: dF_node/dx_{j+1} = G, dF_node/dx_j = -G, where
         # G = coef (sigma - C_sigma) [(t.v_r) I + t v_r^T] (I - t t^T) / (2 |e|)
         g = 0.5 * coef * (sigma - c_sigma) / ln
-        for k in range(3):
-            for m in range(3):
+        lo = 2 if _z_only_edge(fixed, a, b) else 0  # z-z alone, or the whole block
+        for k in range(lo, 3):
+            for m in range(lo, 3):
                 s = 0.0
                 for p in range(3):
                     left = tv * (1.0 if k == p else 0.0) + t[k] * vr[p]
@@ -107,8 +121,8 @@ def add_linear_drag(
                     s += left * proj
                 geo[k, m] = g * s
         cv = 0.25 * coef / dt  # velocity part: dF_node/dx_any = -cv A
-        for k in range(3):
-            for m in range(3):
+        for k in range(lo, 3):
+            for m in range(lo, 3):
                 amat = (sigma - c_sigma) * t[k] * t[m]
                 if k == m:
                     amat += c_sigma
@@ -209,6 +223,7 @@ def add_printed_drag(
     force: np.ndarray,
     ab: np.ndarray,
     with_jacobian: bool,
+    fixed: np.ndarray,
 ) -> None:
     """Drag with the paper's printed angle factors (docs/model.md §4, [choice]):
 
@@ -218,6 +233,7 @@ def add_printed_drag(
     linear law for purely axial or purely normal motion and is weaker in between. The
     Jacobian holds the exact velocity part; the tangent's dependence on q is left out
     (Newton then converges linearly in that term; the step is still implicit in v).
+    ``fixed``: as for :func:`add_linear_drag`.
     """
     t = np.empty(3)
     vr = np.empty(3)
@@ -244,15 +260,16 @@ def add_printed_drag(
         if not with_jacobian:
             continue
         # dF/dv_r: axial g = sigma a|a|/|v| t, normal h = C |b| b / |v|
-        for k in range(3):
-            for m in range(3):
+        lo = 2 if _z_only_edge(fixed, a, c) else 0  # z-z alone, or the whole block
+        for k in range(lo, 3):
+            for m in range(lo, 3):
                 pkm = (1.0 if k == m else 0.0) - t[k] * t[m]
                 dg = sigma * t[k] * (2.0 * abs(ax) * t[m] / nv - ax * abs(ax) * vr[m] / nv**3)
                 dh = c_sigma * ((b[k] * b[m] / nb + nb * pkm) / nv - nb * b[k] * vr[m] / nv**3)
                 jac[k, m] = coef * (dg + dh)
         cv = 0.25 / dt  # dv_r/dx = -1/(2 dt) per node, half the edge force per node
-        for k in range(3):
-            for m in range(3):
+        for k in range(lo, 3):
+            for m in range(lo, 3):
                 d = cv * jac[k, m]  # = -dF_node/dx_any; the residual Jacobian gets +d
                 ab[_DIAG + k - m, a + m] += d
                 ab[_DIAG + k - m - 4, c + m] += d

@@ -237,14 +237,40 @@ def assemble(
     band_zero(ab, n_dof)
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, True)
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True,
-                           tangents_old, transport)  # fmt: skip
+                           tangents_old, transport, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
         add_linear_drag(
-            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
+            q,
+            q_old,
+            dt,
+            n_nodes,
+            rest_lengths,
+            drag_on,
+            flow,
+            mu,
+            sigma,
+            c_sigma,
+            force,
+            ab,
+            True,
+            fixed,
         )
     else:
         add_printed_drag(
-            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, True
+            q,
+            q_old,
+            dt,
+            n_nodes,
+            rest_lengths,
+            drag_on,
+            flow,
+            mu,
+            sigma,
+            c_sigma,
+            force,
+            ab,
+            True,
+            fixed,
         )
     add_vdw(q, vdw, force, ab)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
@@ -303,14 +329,40 @@ def residual(
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, False)
     # (the tangents_old argument, here m1, is not read without the Jacobian)
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False,
-                           m1, False)  # fmt: skip
+                           m1, False, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
         add_linear_drag(
-            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+            q,
+            q_old,
+            dt,
+            n_nodes,
+            rest_lengths,
+            drag_on,
+            flow,
+            mu,
+            sigma,
+            c_sigma,
+            force,
+            ab,
+            False,
+            fixed,
         )
     else:
         add_printed_drag(
-            q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma, force, ab, False
+            q,
+            q_old,
+            dt,
+            n_nodes,
+            rest_lengths,
+            drag_on,
+            flow,
+            mu,
+            sigma,
+            c_sigma,
+            force,
+            ab,
+            False,
+            fixed,
         )
     node = int(vdw[VDW_NODE])
     if node >= 0:  # forces.add_vdw without its Jacobian entry
@@ -816,7 +868,7 @@ class Rod:
         elastic.add_stretch(self.q, n, self.rest_lengths, m.k_s, f, ab, False)
         elastic.add_bend_twist(self.q, n, self._m1, self._m2, self._twist,
                                self.voronoi_lengths, m.k_b, m.k_t, f, ab, False,
-                               self.tangents_old, False)  # fmt: skip
+                               self.tangents_old, False, self.fixed)  # fmt: skip
         return f
 
     def kinetic_energy(self) -> float:
