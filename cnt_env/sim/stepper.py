@@ -239,39 +239,11 @@ def assemble(
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True,
                            tangents_old, transport, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
-        add_linear_drag(
-            q,
-            q_old,
-            dt,
-            n_nodes,
-            rest_lengths,
-            drag_on,
-            flow,
-            mu,
-            sigma,
-            c_sigma,
-            force,
-            ab,
-            True,
-            fixed,
-        )
+        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
+                        force, ab, True, fixed)  # fmt: skip
     else:
-        add_printed_drag(
-            q,
-            q_old,
-            dt,
-            n_nodes,
-            rest_lengths,
-            drag_on,
-            flow,
-            mu,
-            sigma,
-            c_sigma,
-            force,
-            ab,
-            True,
-            fixed,
-        )
+        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
+                         force, ab, True, fixed)  # fmt: skip
     add_vdw(q, vdw, force, ab)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
     res = 0.0
@@ -331,39 +303,11 @@ def residual(
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False,
                            m1, False, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
-        add_linear_drag(
-            q,
-            q_old,
-            dt,
-            n_nodes,
-            rest_lengths,
-            drag_on,
-            flow,
-            mu,
-            sigma,
-            c_sigma,
-            force,
-            ab,
-            False,
-            fixed,
-        )
+        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
+                        force, ab, False, fixed)  # fmt: skip
     else:
-        add_printed_drag(
-            q,
-            q_old,
-            dt,
-            n_nodes,
-            rest_lengths,
-            drag_on,
-            flow,
-            mu,
-            sigma,
-            c_sigma,
-            force,
-            ab,
-            False,
-            fixed,
-        )
+        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
+                         force, ab, False, fixed)  # fmt: skip
     node = int(vdw[VDW_NODE])
     if node >= 0:  # forces.add_vdw without its Jacobian entry
         kc = 4 * node + 1
