@@ -31,9 +31,10 @@ import math
 import multiprocessing
 import os
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +81,7 @@ __all__ = [
     "parse_values",
     "plot_sweep",
     "point_key",
+    "ray_session",
     "read_rows",
     "resolve_param",
     "resolve_sweep",
@@ -222,11 +224,12 @@ def import_ray():
     return ray
 
 
-def _run_ray(
-    points: Sequence[SweepPoint], jobs: int, address: str | None, on_result: ResultCallback
-) -> None:
-    """:func:`run_point_safe` as Ray tasks: on ``address``'s cluster, or on a local
-    instance of ``jobs`` CPUs (started here and shut down afterwards)."""
+@contextmanager
+def ray_session(jobs: int, address: str | None = None) -> Iterator[Any]:
+    """Ray, initialised for the block: on ``address``'s cluster (this cnt_env package
+    shipped to its workers), or a local instance of ``jobs`` CPUs whose workers import
+    cnt_env from this source tree, shut down afterwards. An instance already running is
+    used as it is. RunInputError with the install hint when Ray is missing."""
     ray = import_ray()
     import cnt_env
 
@@ -234,7 +237,6 @@ def _run_ray(
     if started_here:
         package_root = str(Path(cnt_env.__file__).resolve().parent.parent)
         if address is None:
-            # local instance: the workers import cnt_env from this source tree
             path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p)
             runtime_env: dict[str, Any] = {"env_vars": {"PYTHONPATH": path}}
             ray.init(
@@ -244,9 +246,19 @@ def _run_ray(
                 runtime_env=runtime_env,
             )
         else:
-            # a cluster: ship this cnt_env package to its workers
             ray.init(address=address, log_to_driver=False, runtime_env={"py_modules": [cnt_env]})
     try:
+        yield ray
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def _run_ray(
+    points: Sequence[SweepPoint], jobs: int, address: str | None, on_result: ResultCallback
+) -> None:
+    """:func:`run_point_safe` as Ray tasks (:func:`ray_session`)."""
+    with ray_session(jobs, address) as ray:
         task = ray.remote(num_cpus=1, max_retries=0)(run_point_safe)
         refs = {task.remote(point): point for point in points}
         pending = list(refs)
@@ -260,9 +272,6 @@ def _run_ray(
                 except Exception as exc:  # the task or its worker died
                     row = failure_row(point, exc, time.perf_counter() - start)
                 on_result(point, row)
-    finally:
-        if started_here:
-            ray.shutdown()
 
 
 def execute(
