@@ -137,33 +137,19 @@ def _vec(a: np.ndarray) -> tuple:
 
 
 @njit(cache=True, inline="always")
-def _d2_ee(w: float, ine2: float, kap: float, sgn: float, ichi: float, tt: tuple, tmp: tuple,
-           te: tuple, kb: tuple, mfe: tuple, k: int, m: int) -> float:  # fmt: skip
-    """cb kappa_c d2kappa_c/de_k de_m without its diagonal term (primer; c = 1, 2)."""
+def _d2_same(w: float, inv2: float, kap: float, smid: float, sgn: float, ichi: float,
+             tt: tuple, tmp: tuple, t: tuple, kb: tuple, mf: tuple, k: int,
+             m: int) -> float:  # fmt: skip
+    """cb kappa_c d2kappa_c/dd_k dd_m for d = e or f, without its diagonal term (primer;
+    c = 1, 2): with t, inv2, tmp, mf those of e (smid = -sgn) or of f (smid = +sgn)."""
     return (
         w
-        * ine2
+        * inv2
         * (
             2.0 * kap * (tt[k] * tt[m])
-            - sgn * (tmp[k] * tt[m] + tt[k] * tmp[m])
-            + kap * ichi * te[k] * te[m]
-            + 0.25 * sgn * (kb[k] * mfe[m] + mfe[k] * kb[m])
-        )
-    )
-
-
-@njit(cache=True, inline="always")
-def _d2_ff(w: float, inf2: float, kap: float, sgn: float, ichi: float, tt: tuple, tmp2: tuple,
-           tf: tuple, kb: tuple, mff: tuple, k: int, m: int) -> float:  # fmt: skip
-    """cb kappa_c d2kappa_c/df_k df_m without its diagonal term."""
-    return (
-        w
-        * inf2
-        * (
-            2.0 * kap * (tt[k] * tt[m])
-            + sgn * (tmp2[k] * tt[m] + tt[k] * tmp2[m])
-            + kap * ichi * tf[k] * tf[m]
-            + 0.25 * sgn * (kb[k] * mff[m] + mff[k] * kb[m])
+            + smid * (tmp[k] * tt[m] + tt[k] * tmp[m])
+            + kap * ichi * t[k] * t[m]
+            + 0.25 * sgn * (kb[k] * mf[m] + mf[k] * kb[m])
         )
     )
 
@@ -206,8 +192,8 @@ def _bend_twist_zz(te: tuple, tf: tuple, tt: tuple, kb: tuple, ichi: float, ine:
         else:
             kap, sgn, mfe, mff, tmp, tmp2 = kappa2, -1.0, m1e, m1f, a2, b2
         w = cb * kap
-        h[2, 2] += _d2_ee(w, ine2, kap, sgn, ichi, tt, tmp, te, kb, mfe, 2, 2)
-        h[5, 5] += _d2_ff(w, inf2, kap, sgn, ichi, tt, tmp2, tf, kb, mff, 2, 2)
+        h[2, 2] += _d2_same(w, ine2, kap, -sgn, sgn, ichi, tt, tmp, te, kb, mfe, 2, 2)
+        h[5, 5] += _d2_same(w, inf2, kap, sgn, sgn, ichi, tt, tmp2, tf, kb, mff, 2, 2)
         h[2, 2] -= w * kap * ichi * ine2
         h[5, 5] -= w * kap * ichi * inf2
         h[2, 5] += _d2_ef(w, inef, kap, sgn, ichi, tt, tmp, tmp2, te, tf, 2, 2)
@@ -318,8 +304,9 @@ def _bend_twist_reduced(
         w = cb * kap
         for k in range(3):
             for m in range(k, 3):
-                h[k, m] += _d2_ee(w, ine2, kap, sgn, ichi, tt, tmp, te, kb, mfe, k, m)
-                h[3 + k, 3 + m] += _d2_ff(w, inf2, kap, sgn, ichi, tt, tmp2, tf, kb, mff, k, m)
+                h[k, m] += _d2_same(w, ine2, kap, -sgn, sgn, ichi, tt, tmp, te, kb, mfe, k, m)
+                h[3 + k, 3 + m] += _d2_same(w, inf2, kap, sgn, sgn, ichi, tt, tmp2, tf, kb, mff,
+                                            k, m)  # fmt: skip
             h[k, k] -= w * kap * ichi * ine2
             h[3 + k, 3 + k] -= w * kap * ichi * inf2
             # D2/DeDf (full off-diagonal block)
@@ -476,34 +463,22 @@ def add_bend_twist(
             continue
         if zz:  # the z-z entries of nodes i-1, i, i+1 (local DOFs 2, 6, 10) alone
             h[5, 2] = h[2, 5]
-            for a in range(2, 11, 4):
-                ia0 = _R_INDEX[a, 0]
-                ia1 = _R_INDEX[a, 1]
-                sa0 = _R_SIGN[a, 0]
-                sa1 = _R_SIGN[a, 1]
-                for b in range(a, 11, 4):
-                    ib0 = _R_INDEX[b, 0]
-                    ib1 = _R_INDEX[b, 1]
-                    sb0 = _R_SIGN[b, 0]
-                    sb1 = _R_SIGN[b, 1]
-                    hab = (sa0 * (sb0 * h[ia0, ib0] + sb1 * h[ia0, ib1])
-                           + sa1 * (sb0 * h[ia1, ib0] + sb1 * h[ia1, ib1]))  # fmt: skip
-                    ab[_DIAG + a - b, a0 + b] += hab
-                    if b != a:
-                        ab[_DIAG + b - a, a0 + a] += hab
-            continue
-        for a in range(8):  # mirror the upper triangle
-            for b in range(a):
-                h[a, b] = h[b, a]
-        if transport:
-            _transport_terms(e, f, _vec(tangents_old[i - 1]), _vec(tangents_old[i]), g, h, kx)
+            first, step = 2, 4
+        else:
+            for a in range(8):  # mirror the upper triangle
+                for b in range(a):
+                    h[a, b] = h[b, a]
+            if transport:
+                _transport_terms(e, f, _vec(tangents_old[i - 1]), _vec(tangents_old[i]), g, h,
+                                 kx)  # fmt: skip
+            first, step = 0, 1
         # H_q = T^T H_r T, each local DOF a = s0 r[i0] + s1 r[i1] (s1 = 0 when single)
-        for a in range(11):
+        for a in range(first, 11, step):
             ia0 = _R_INDEX[a, 0]
             ia1 = _R_INDEX[a, 1]
             sa0 = _R_SIGN[a, 0]
             sa1 = _R_SIGN[a, 1]
-            for b in range(a, 11):
+            for b in range(a, 11, step):
                 ib0 = _R_INDEX[b, 0]
                 ib1 = _R_INDEX[b, 1]
                 sb0 = _R_SIGN[b, 0]
