@@ -1,22 +1,13 @@
 """A planning oracle for the route task: what a flow schedule can score at the env's
 control interval when it may try actions on copies of the simulator (issue 10).
 
-The rollout algorithm (Bertsekas) with the route follower as the base policy. At every
-control step, K candidate actions are tried, each on a deep copy of the env and of the
-follower (the copies are bit-identical continuations: the env is deterministic): the
-candidate for one step, then the follower to the episode's end; the candidate whose copy
-ends with the highest final score is played on the real env. The candidates are the
-follower's own action and its flow turned by each ``--turns`` angle and slowed to each
-``--speeds`` fraction. The follower's own action wins ties, and its rollout's score is
-carried from the step before (the continuation of the chosen candidate's rollout), so
-the oracle's final score is never below the follower's (the rollout algorithm's
-improvement property, exact here because the env is deterministic).
-
-This is not a deployable policy (it reads the simulator's state through the copies);
-it measures what flow schedules at the env's control interval reach around the
-follower, so that the RL goal "follower + half its gap" can be judged against the
-physics. It costs (K - 1) x the remaining steps per control step (~N^2 (K - 1) / 2 env
-steps per episode of N).
+The rollout algorithm with the route follower as the base policy
+(``training/oracle.py``, where it is described): at every control step the follower's
+action and K - 1 variants are each tried on a copy of the env, followed by the follower to
+the episode's end, and the best is played; its score is never below the follower's. It is
+not a deployable policy (it reads the simulator through the copies); it measures what
+flow schedules at the env's control interval reach around the follower, so that the RL
+goal "follower + half its gap" can be judged against the physics.
 
     python benchmarks/mpc_oracle.py --seeds 0 --jobs 2
 
@@ -27,7 +18,6 @@ writes one JSON line per episode (oracle and follower on the same seed) to
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import time
@@ -40,59 +30,26 @@ sys.path.insert(0, str(ROOT))
 OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
 
 
-def candidates(action: Any, vbar_max: float, turns: list[float], speeds: list[float]) -> list:
-    """The follower's action first, then its flow turned by each angle (radians) and
-    slowed to each fraction of its speed."""
-    import numpy as np
-
-    from cnt_env.task.spaces import action_from_flow, flow_from_action
-
-    vbar, phi = flow_from_action(np.asarray(action, dtype=float), vbar_max)
-    out = [np.asarray(action, dtype=np.float32)]
-    out += [action_from_flow(vbar, phi + t, vbar_max) for t in turns]
-    out += [action_from_flow(s * vbar, phi, vbar_max) for s in speeds]
-    return out
-
-
-def _finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dict) -> float:
-    """Play the follower from here to the episode's end; the final score."""
-    while not (term or trunc):
-        obs, _, term, trunc, info = env.step(follower.act(obs))
-    return float(info["score"])
-
-
 def episode(job: dict[str, Any]) -> dict[str, Any]:
     """One episode of the oracle (``job["mode"] == "oracle"``) or of the follower alone."""
     from policies import RouteFollower
     from training.common import env_settings, load_config, make_env
+    from training.oracle import RolloutOracle
 
     env_kwargs, max_steps = env_settings(load_config(ROOT / "training/configs/ppo.yml"))
     env = make_env(env_kwargs, max_steps)
     follower = RouteFollower.from_env(env)
     obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
     follower.reset(job["seed"])
-    vbar_max = env.unwrapped.vbar_max
+    oracle = RolloutOracle(env, follower, tuple(job["turns"]), tuple(job["speeds"]))
     t0 = time.perf_counter()
-    steps = deviations = rollouts = 0
-    base = None  # final score of following the follower from the current state
+    steps = 0
     while True:
-        a = follower.act(obs)
         if job["mode"] == "oracle":
-            cands = candidates(a, vbar_max, job["turns"], job["speeds"])
-            if base is None:
-                base = _finish(*copy.deepcopy((env, follower)), obs, False, False, info)
-                rollouts += 1
-            chosen = 0
-            for k, cand in enumerate(cands[1:], start=1):
-                e, f = copy.deepcopy((env, follower))
-                o, _, term, trunc, inf = e.step(cand)
-                score = _finish(e, f, o, term, trunc, inf)
-                rollouts += 1
-                e.close()
-                if score > base + 1e-12:  # the follower's own action wins ties
-                    base, chosen = score, k
-            deviations += chosen > 0
-            a = cands[chosen]
+            cands, _, k = oracle.choose(obs, info)
+            a = cands[k]
+        else:
+            a = follower.act(obs)
         obs, _, term, trunc, info = env.step(a)
         steps += 1
         if term or trunc:
@@ -101,8 +58,9 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     return {
         "mode": job["mode"], "target": job["target"], "seed": job["seed"],
         "score": float(info["score"]), "shorts": int(info["shorts"]),
-        "completed": bool(info["completed"]), "steps": steps, "deviations": deviations,
-        "rollouts": rollouts, "turns": job["turns"], "speeds": job["speeds"],
+        "completed": bool(info["completed"]), "steps": steps,
+        "deviations": sum(k > 0 for k in oracle.history), "rollouts": oracle.rollouts,
+        "turns": job["turns"], "speeds": job["speeds"],
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip
 

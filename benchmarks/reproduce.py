@@ -432,18 +432,31 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
     other = [r for r in every if "|dt=" in r["key"]]
     if other:
         lines += ["", "## Other time steps (same points, dt_factor changed)", "",
-                  "| point | dt_factor | A | lambda_x | A at default | lambda_x at default |",
-                  "|---|---|---|---|---|---|"]  # fmt: skip
-        for r in other:
+                  "| row | point | dt_factor | class | A | lambda_x | R0 | A change | "
+                  "lambda_x change | R0 change |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        worst = 0.0
+        for r in sorted(other, key=lambda r: (r["row"], sorted(r["groups"].items()))):
             same = re.sub(r"\|dt=[^|]*", "", r["key"])  # the point at the default step
-            base = [b for b in recs if b["key"] == same]
-            b = base[0] if base else {"amplitude": None, "wavelength_x": None}
+            b = next((b for b in recs if b["key"] == same), {})
+            changes = []
+            for k in ("amplitude", "wavelength_x", "coil_radius"):
+                new, old = r.get(k), b.get(k)
+                if new is None or old is None or not old:
+                    changes.append("")
+                    continue
+                rel = new / old - 1.0
+                worst = max(worst, abs(rel))
+                changes.append(f"{100 * rel:+.1f}%")
             g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
             lines.append(
-                f"| {r['preset']} {g} | {r['dt_factor']:g} | {_fmt(r['amplitude'])} | "
-                f"{_fmt(r['wavelength_x'])} | {_fmt(b['amplitude'])} | "
-                f"{_fmt(b['wavelength_x'])} |"
+                f"| {r['row']} | {r['preset']} {g} | {r['dt_factor']:g} | {r['pattern']} "
+                f"(default: {b.get('pattern', '-')}) | {_fmt(r['amplitude'])} | "
+                f"{_fmt(r['wavelength_x'])} | {_fmt(r['coil_radius'], 2)} | "
+                + " | ".join(changes)
+                + " |"
             )
+        lines += ["", f"Largest change of A, lambda_x or R0: {100 * worst:.1f}%."]
     total = sum(r["wall_s"] for r in recs)
     lines += ["", f"Sum of per-point wall times: {total:.0f} s ({len(recs)} points)."]
     return "\n".join(lines) + "\n"

@@ -46,3 +46,22 @@ def test_ray_backend_gives_the_same_points(tmp_path: Path) -> None:
     for key in a:  # deterministic: the same figures whatever ran them
         for field in ("amplitude", "wavelength_x", "coil_radius", "steps", "pattern"):
             assert a[key][field] == b[key][field], (key, field)
+
+
+def test_summary_compares_other_time_steps_with_the_default_point() -> None:
+    """A point re-run at another dt_factor is listed with its relative change."""
+    lines = (ROOT / "benchmarks/results/reproduce/results.jsonl").read_text().splitlines()
+    recs = [json.loads(x) for x in lines]
+    serp = next(r for r in recs if r["amplitude"] is not None and r["wavelength_x"])
+    coil = next(r for r in recs if r["coil_radius"] is not None)
+    half = [
+        {**serp, "key": serp["key"] + "|dt=0.025", "dt_factor": 0.025,
+         "amplitude": 1.02 * serp["amplitude"], "wavelength_x": 0.97 * serp["wavelength_x"]},
+        {**coil, "key": coil["key"] + "|dt=0.025", "dt_factor": 0.025,
+         "coil_radius": 1.004 * coil["coil_radius"]},
+    ]  # fmt: skip
+    text = reproduce.summary([serp, coil, *half], serp["candidate"])
+    table = text.split("## Other time steps")[1]
+    assert "| +2.0% | -3.0% |" in table
+    assert "+0.4% |" in table
+    assert "Largest change of A, lambda_x or R0: 3.0%." in table

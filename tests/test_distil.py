@@ -1,0 +1,129 @@
+"""The planning oracle (training/oracle.py) and its distillation (training/distil.py):
+the candidates in closed form, the rollout algorithm's exactness on the deterministic
+env (its predicted score is the one it realises, never below the follower's), the
+imitation targets, and a fitted agent that loads as a residual policy."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+from cnt_env.sim import warmstart
+from cnt_env.task.spaces import flow_from_action
+from policies import RouteFollower, load_policy
+from training import distil
+from training.oracle import RolloutOracle, candidates
+
+ROUTE = {"waypoints": [[0, 0], [60, 0]], "width": 15.0}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cache(tmp_path_factory: pytest.TempPathFactory):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
+        yield
+
+
+def test_candidates_turn_and_slow_the_followers_flow() -> None:
+    a = np.array([0.3, -0.5], dtype=np.float32)
+    v0, p0 = flow_from_action(a, 0.13)
+    cands = candidates(a, 0.13, turns=(-0.4, 0.4), speeds=(0.5,))
+    assert len(cands) == 4 and np.array_equal(cands[0], a)
+    for c, dphi in zip(cands[1:3], (-0.4, 0.4), strict=True):
+        v, p = flow_from_action(c, 0.13)
+        assert v == pytest.approx(v0, rel=1e-5)
+        assert math.remainder(p - p0 - dphi, 2 * math.pi) == pytest.approx(0.0, abs=1e-5)
+    v, p = flow_from_action(cands[3], 0.13)
+    assert v == pytest.approx(0.5 * v0, rel=1e-5)
+    assert math.remainder(p - p0, 2 * math.pi) == pytest.approx(0.0, abs=1e-5)
+
+
+def _short_env() -> gymnasium.Env:
+    return gymnasium.make("CNTDeposit-v0", score="corridor", max_episode_steps=5)
+
+
+def test_rollout_oracle_realises_its_prediction_and_never_loses_to_the_follower() -> None:
+    env = _short_env()
+    try:
+        follower = RouteFollower.from_env(env)
+        obs, info = env.reset(seed=3, options={"target": ROUTE})
+        follower.reset(3)
+        term = trunc = False
+        while not (term or trunc):
+            obs, _, term, trunc, info = env.step(follower.act(obs))
+        follower_score = float(info["score"])
+
+        obs, info = env.reset(seed=3, options={"target": ROUTE})
+        follower.reset(3)
+        oracle = RolloutOracle(env, follower, turns=(0.4,), speeds=())
+        predicted, first = [], None
+        term = trunc = False
+        while not (term or trunc):
+            cands, scores, k = oracle.choose(obs, info)
+            first = scores if first is None else first
+            predicted.append(scores[k])
+            obs, _, term, trunc, info = env.step(cands[k])
+        # the first base rollout is the follower's own episode, bit for bit
+        assert first[0] == follower_score
+        assert oracle.rollouts == 1 + len(predicted) and len(oracle.history) == len(predicted)
+        # the deterministic env realises every prediction exactly; scores never fall
+        assert all(b >= a for a, b in itertools.pairwise(predicted))
+        assert float(info["score"]) == predicted[-1]
+        assert float(info["score"]) >= follower_score
+    finally:
+        env.close()
+
+
+def _episode(obs: np.ndarray, follower: np.ndarray, cands: np.ndarray, scores: np.ndarray,
+             chosen: np.ndarray, index: int) -> dict:  # fmt: skip
+    summary = {"index": index, "difficulty": 0.2, "wall_s": 1.0}
+    return {"obs": obs, "follower": follower, "candidates": cands, "scores": scores,
+            "chosen": chosen, "summary": summary}  # fmt: skip
+
+
+def test_targets_are_the_scaled_correction_where_the_oracle_gains_enough() -> None:
+    f = np.array([[0.1, 0.2], [0.5, 0.5], [-0.9, 0.0]], dtype=np.float32)
+    step = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, -0.9]], dtype=np.float32)
+    cands = f[:, None, :] + step[None]
+    scores = np.array([[0.5, 0.6, 0.4], [0.5, 0.5005, 0.4], [0.5, 0.4, 0.9]])
+    chosen = np.array([1, 1, 2])
+    ep = _episode(np.zeros((3, 4)), f, cands, scores, chosen, 0)
+    r = distil.targets(ep, scale=0.6, margin=0.001)
+    assert r[0] == pytest.approx([0.5, 0.0])  # 0.3 / 0.6
+    assert np.array_equal(r[1], [0.0, 0.0])  # gain 5e-4 <= margin: the follower's action
+    assert r[2] == pytest.approx([0.0, -1.0])  # -0.9 / 0.6 clipped
+    assert np.array_equal(distil.targets(ep, 0.6, 0.0)[1], [0.5, 0.0])
+
+
+def test_fitted_agent_loads_as_a_residual_policy_and_acts_its_targets(tmp_path: Path) -> None:
+    env = _short_env()
+    try:
+        obs0, _ = env.reset(seed=0, options={"target": ROUTE})
+        rng = np.random.default_rng(0)
+        labels = tmp_path / "labels"
+        labels.mkdir()
+        fixed = []
+        for i in range(2):
+            obs = (obs0 + rng.normal(0.0, 1.0, (3, obs0.size))).astype(np.float32)
+            f = rng.uniform(-0.3, 0.3, (3, 2)).astype(np.float32)
+            cands = np.stack([np.stack([a, a + rng.uniform(-0.4, 0.4, 2)]) for a in f])
+            ep = _episode(obs, f, cands.astype(np.float32), np.array([[0.5, 0.7]] * 3),
+                          np.array([1, 1, 1]), i)  # fmt: skip
+            ep["summary"] = np.array(json.dumps(ep["summary"]))
+            np.savez(labels / f"ep_{i}.npz", **ep)
+            fixed.append((obs, cands[:, 1] - f))
+        report = distil.fit(tmp_path, scale=0.6, margin=0.0, epochs=400, seed=0)
+        assert report["train_states"] == 6 and report["train_mse"] < 0.1 * report["train_zero_mse"]
+        pol = load_policy(tmp_path / "model" / f"{distil.NAME}.zip", env=env)
+        assert pol.scale == 0.6 and pol.base is not None
+        o = pol.vecnormalize.normalize_obs(fixed[0][0][:1])
+        residual, _ = pol.model.predict(o, deterministic=True)
+        assert residual.ravel() == pytest.approx(fixed[0][1][0] / 0.6, abs=0.1)
+    finally:
+        env.close()

@@ -1,0 +1,98 @@
+"""The planning oracle of the route task: the rollout algorithm (Bertsekas) with the route
+follower as its base policy (issue 10).
+
+At every control step, candidate actions are tried, each on a deep copy of the env and
+of the follower (bit-identical continuations: the env is deterministic): the candidate
+for one step, then the follower to the episode's end; the candidate whose copy ends with
+the highest final score is played. The candidates are the follower's own action and its
+flow turned by each ``turns`` angle and slowed to each ``speeds`` fraction. The
+follower's own action wins ties, and its rollout's score is carried from the step before
+(the continuation of the chosen candidate's rollout), so the oracle's final score is
+never below the follower's (the rollout algorithm's improvement property, exact here).
+
+It reads the simulator through the copies, so it is not a deployable policy: it measures
+what flow schedules can reach (``benchmarks/mpc_oracle.py``) and labels the states a
+trained agent should act on (``training/distil.py``). Cost: (K - 1) x the remaining
+steps per control step, ~N^2 (K - 1) / 2 env steps per episode of N steps.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DEFAULT_SPEEDS", "DEFAULT_TURNS", "RolloutOracle", "candidates", "finish"]
+
+#: The candidate turns (rad) and speed fractions of the measured oracle
+#: (benchmarks/results/mpc_oracle.jsonl).
+DEFAULT_TURNS = (-0.4, 0.4)
+DEFAULT_SPEEDS = (0.5,)
+
+
+def candidates(action: Any, vbar_max: float, turns=DEFAULT_TURNS,
+               speeds=DEFAULT_SPEEDS) -> list[np.ndarray]:  # fmt: skip
+    """The follower's action first, then its flow turned by each angle (radians) and
+    slowed to each fraction of its speed."""
+    from cnt_env.task.spaces import action_from_flow, flow_from_action
+
+    vbar, phi = flow_from_action(np.asarray(action, dtype=float), vbar_max)
+    out = [np.asarray(action, dtype=np.float32)]
+    out += [action_from_flow(vbar, phi + t, vbar_max) for t in turns]
+    out += [action_from_flow(s * vbar, phi, vbar_max) for s in speeds]
+    return [np.asarray(a, dtype=np.float32) for a in out]
+
+
+def finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dict) -> float:
+    """Play the follower from here to the episode's end; the final score."""
+    while not (term or trunc):
+        obs, _, term, trunc, info = env.step(follower.act(obs))
+    return float(info["score"])
+
+
+@dataclass
+class RolloutOracle:
+    """One episode's oracle over ``env`` (a CNTDeposit-v0, wrapped or not) and its
+    ``follower`` (``policies.RouteFollower``), both reset by the caller. ``choose(obs,
+    info)`` returns the candidates, their rollout scores (index 0: the follower's own
+    action) and the index to play; the caller steps ``env`` with that candidate and then
+    calls ``follower.act`` only through ``choose`` (the follower's memory advances once per
+    control step)."""
+
+    env: Any
+    follower: Any
+    turns: tuple[float, ...] = DEFAULT_TURNS
+    speeds: tuple[float, ...] = DEFAULT_SPEEDS
+    base: float | None = None  # final score of following the follower from the state
+    rollouts: int = 0
+    history: list[int] = field(default_factory=list)
+
+    def choose(self, obs: Any, info: dict) -> tuple[list[np.ndarray], list[float], int]:
+        # the copies hold the follower before this step's act(), so each rollout replays
+        # it from the same memory as the real follower
+        snapshot = copy.deepcopy((self.env, self.follower))
+        a = self.follower.act(obs)
+        cands = candidates(a, self.env.unwrapped.vbar_max, self.turns, self.speeds)
+        if self.base is None:
+            e, f = copy.deepcopy(snapshot)
+            self.base = finish(e, f, obs, False, False, info)
+            self.rollouts += 1
+            e.close()
+        scores = [self.base]
+        chosen = 0
+        for cand in cands[1:]:
+            e, f = copy.deepcopy(snapshot)
+            f.act(obs)  # the follower's memory as the real one's after this step's act
+            o, _, term, trunc, inf = e.step(cand)
+            score = finish(e, f, o, term, trunc, inf)
+            self.rollouts += 1
+            e.close()
+            scores.append(score)
+            if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
+                chosen = len(scores) - 1
+        self.base = scores[chosen]
+        self.history.append(chosen)
+        snapshot[0].close()
+        return cands, scores, chosen
