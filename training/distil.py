@@ -164,8 +164,9 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
 
     from policies.sb3 import save_vecnormalize, vecnormalize_path, write_manifest
 
-    from .common import ENV_ID, ResidualAction, algo_kwargs, load_config, make_env
+    from .common import ENV_ID, ResidualAction, algo_kwargs, limit_threads, load_config, make_env
 
+    limit_threads()
     eps = load_labels(out)
     if not eps:
         raise SystemExit(f"no labels in {out / 'labels'}: run the label phase first")
