@@ -435,20 +435,25 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
                   "| row | point | dt_factor | class | A | lambda_x | R0 | A change | "
                   "lambda_x change | R0 change |",
                   "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        worst = 0.0
-        for r in sorted(other, key=lambda r: (r["row"], sorted(r["groups"].items()))):
+        worst: dict[float, tuple[float, str]] = {}
+        for r in sorted(
+            other, key=lambda r: (r["dt_factor"], r["row"], sorted(r["groups"].items()))
+        ):
             same = re.sub(r"\|dt=[^|]*", "", r["key"])  # the point at the default step
             b = next((b for b in recs if b["key"] == same), {})
+            g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
+            # the measures of the point's kind: R0 for a coil, A and lambda_x otherwise
+            keys = ("coil_radius",) if r["preset"] == "coil" else ("amplitude", "wavelength_x")
             changes = []
             for k in ("amplitude", "wavelength_x", "coil_radius"):
                 new, old = r.get(k), b.get(k)
-                if new is None or old is None or not old:
+                if k not in keys or new is None or old is None or not old:
                     changes.append("")
                     continue
                 rel = new / old - 1.0
-                worst = max(worst, abs(rel))
+                if abs(rel) > worst.get(r["dt_factor"], (0.0, ""))[0]:
+                    worst[r["dt_factor"]] = (abs(rel), f"{r['row']} {g}, {k}")
                 changes.append(f"{100 * rel:+.1f}%")
-            g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
             lines.append(
                 f"| {r['row']} | {r['preset']} {g} | {r['dt_factor']:g} | {r['pattern']} "
                 f"(default: {b.get('pattern', '-')}) | {_fmt(r['amplitude'])} | "
@@ -456,7 +461,10 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
                 + " | ".join(changes)
                 + " |"
             )
-        lines += ["", f"Largest change of A, lambda_x or R0: {100 * worst:.1f}%."]
+        lines.append("")
+        for dt, (w, where) in sorted(worst.items()):
+            lines.append(f"Largest change at dt_factor {dt:g} (A and lambda_x of serpentines, "
+                         f"R0 of coils): {100 * w:.1f}% ({where}).")  # fmt: skip
     total = sum(r["wall_s"] for r in recs)
     lines += ["", f"Sum of per-point wall times: {total:.0f} s ({len(recs)} points)."]
     return "\n".join(lines) + "\n"

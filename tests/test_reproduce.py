@@ -52,8 +52,8 @@ def test_summary_compares_other_time_steps_with_the_default_point() -> None:
     """A point re-run at another dt_factor is listed with its relative change."""
     lines = (ROOT / "benchmarks/results/reproduce/results.jsonl").read_text().splitlines()
     recs = [json.loads(x) for x in lines]
-    serp = next(r for r in recs if r["amplitude"] is not None and r["wavelength_x"])
-    coil = next(r for r in recs if r["coil_radius"] is not None)
+    serp = next(r for r in recs if r["preset"] == "serpentine" and r["wavelength_x"])
+    coil = next(r for r in recs if r["preset"] == "coil" and r["coil_radius"])
     half = [
         {**serp, "key": serp["key"] + "|dt=0.025", "dt_factor": 0.025,
          "amplitude": 1.02 * serp["amplitude"], "wavelength_x": 0.97 * serp["wavelength_x"]},
@@ -64,4 +64,9 @@ def test_summary_compares_other_time_steps_with_the_default_point() -> None:
     table = text.split("## Other time steps")[1]
     assert "| +2.0% | -3.0% |" in table
     assert "+0.4% |" in table
-    assert "Largest change of A, lambda_x or R0: 3.0%." in table
+    assert (
+        "Largest change at dt_factor 0.025 (A and lambda_x of serpentines, R0 of coils): 3.0%"
+        in table
+    )
+    coil_row = next(x for x in table.splitlines() if x.startswith("| coil | coil"))
+    assert coil_row.endswith("|  |  | +0.4% |")  # a coil's A and lambda_x are not compared
