@@ -12,7 +12,7 @@ algorithm (``training/oracle.py``) on routes drawn from the training families.
    ``clip((a_oracle - a_follower) / scale, -1, 1)``, where the chosen candidate beats the
    follower's own by more than ``--margin`` (else 0: the follower's action), on
    observations normalised by the labels' statistics. Episodes ``i mod 5 == 4`` are held
-   out: the fit keeps the epoch with the lowest error on them (checked every 10).
+   out: the fit keeps the epoch with the lowest error on them.
 
 The model is written as a training run's (``ppo_distil.zip``, its VecNormalize statistics
 as ``.npz`` + ``.json``, ``ppo_distil.yml`` with the residual wrapper, ``MANIFEST.json``),
@@ -155,9 +155,10 @@ def targets(ep: dict[str, np.ndarray], scale: float, margin: float) -> np.ndarra
 
 
 def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
-        models: Path | None = None) -> dict[str, Any]:  # fmt: skip
+        models: Path | None = None, limit: int | None = None) -> dict[str, Any]:  # fmt: skip
     """Fit the distilled residual agent on the labels of ``out`` (module doc) and save it
-    in ``models`` (default ``out/model``); returns the fit report."""
+    in ``models`` (default ``out/model``), from the label episodes of index < ``limit``
+    if given (a learning curve in the number of labels); returns the fit report."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -167,7 +168,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
     from .common import ENV_ID, ResidualAction, algo_kwargs, limit_threads, load_config, make_env
 
     limit_threads()
-    eps = load_labels(out)
+    eps = [e for e in load_labels(out) if limit is None or e["summary"]["index"] < limit]
     if not eps:
         raise SystemExit(f"no labels in {out / 'labels'}: run the label phase first")
     config = load_config(CONFIG)
@@ -215,7 +216,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
             opt.zero_grad()
             loss.backward()
             opt.step()
-        if xv is not None and (epoch % 10 == 0 or epoch == epochs):
+        if xv is not None:
             with torch.no_grad():  # early stopping on the held-out episodes
                 v = float(torch.mean((mean_action(xv) - yv) ** 2))
             if v < best[0]:
@@ -313,6 +314,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit-only", action="store_true")
     ap.add_argument("--model-dir", type=Path, default=None, help="default: OUT/model")
     ap.add_argument(
+        "--fit-episodes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="fit on the label episodes of index < N only",
+    )
+    ap.add_argument(
         "--validate",
         type=int,
         default=4,
@@ -327,7 +335,9 @@ def main(argv: list[str] | None = None) -> int:
         label(args.out, args.episodes, args.seed0, difficulty, families, args.jobs,
               t0 + args.max_wall_seconds)  # fmt: skip
     models = args.model_dir or args.out / "model"
-    report = fit(args.out, args.scale, args.margin, args.epochs, args.seed, models)
+    report = fit(
+        args.out, args.scale, args.margin, args.epochs, args.seed, models, args.fit_episodes
+    )
     report["wall_s"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(report), flush=True)
     if args.validate:
