@@ -14,7 +14,6 @@ import gymnasium
 import numpy as np
 import pytest
 
-from cnt_env.sim import warmstart
 from cnt_env.task.spaces import flow_from_action
 from policies import RouteFollower, load_policy
 from training import distil
@@ -23,11 +22,8 @@ from training.oracle import RolloutOracle, candidates
 ROUTE = {"waypoints": [[0, 0], [60, 0]], "width": 15.0}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache(tmp_path_factory: pytest.TempPathFactory):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
-        yield
+# warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
 def test_candidates_turn_and_slow_the_followers_flow() -> None:

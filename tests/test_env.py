@@ -52,13 +52,8 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp("warm_cache"))
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _no_user_cache(tmp_path_factory: pytest.TempPathFactory):
-    """Whatever a test forgets to pass, the warm-state cache never lands in the user's
-    cache directory (also in subprocess workers, which inherit the environment)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("default_cache")))
-        yield
+# warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
 @pytest.fixture(scope="module")

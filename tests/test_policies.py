@@ -10,7 +10,6 @@ import gymnasium
 import numpy as np
 import pytest
 
-from cnt_env.sim import warmstart
 from cnt_env.task import targets as T
 from cnt_env.task.env import flow_from_action
 from policies import (
@@ -33,11 +32,8 @@ SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              sim_options={"dt_factor": 0.05, "sliding": "B"}, score="thin")  # fmt: skip
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache(tmp_path_factory: pytest.TempPathFactory):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
-        yield
+# warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
 @pytest.mark.parametrize("vbar", [0.0, 0.02, 0.065, 0.13])

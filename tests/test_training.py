@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cnt_env.sim import warmstart
 from policies import PRETRAINED_DIR, load_policy
 
 SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
@@ -23,12 +22,8 @@ SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
 RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache(tmp_path_factory: pytest.TempPathFactory):
-    """Warm states go to a temporary cache, also in worker processes."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
-        yield
+# warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
 def _tiny_config() -> dict:

@@ -1,0 +1,17 @@
+"""Shared fixtures."""
+
+from __future__ import annotations
+
+import pytest
+
+from cnt_env.sim import warmstart
+
+
+@pytest.fixture(scope="module")
+def temp_warm_cache(tmp_path_factory: pytest.TempPathFactory):
+    """The warm-state cache of a test module: a temporary directory (through the
+    environment, so subprocess workers inherit it), never the user's cache. Use it with
+    ``pytestmark = pytest.mark.usefixtures("temp_warm_cache")``."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(warmstart.CACHE_ENV_VAR, str(tmp_path_factory.mktemp("warm_cache")))
+        yield
