@@ -114,7 +114,9 @@ def test_fitted_agent_loads_as_a_residual_policy_and_acts_its_targets(tmp_path: 
             ep["summary"] = np.array(json.dumps(ep["summary"]))
             np.savez(labels / f"ep_{i}.npz", **ep)
             fixed.append((obs, cands[:, 1] - f))
-        report = distil.fit(tmp_path, scale=0.6, margin=0.0, epochs=400, seed=0)
+        (labels / "ep_2.tmp.npz").write_bytes(b"")  # an abandoned episode: not a label
+        report = distil.fit(tmp_path, scale=0.6, margin=0.0, epochs=400, seed=0,
+                            models=tmp_path / "model")  # fmt: skip
         assert report["train_states"] == 6 and report["train_mse"] < 0.1 * report["train_zero_mse"]
         pol = load_policy(tmp_path / "model" / f"{distil.NAME}.zip", env=env)
         assert pol.scale == 0.6 and pol.base is not None

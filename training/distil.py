@@ -73,10 +73,8 @@ def label_episode(job: dict[str, Any]) -> dict[str, Any]:
     t0 = time.perf_counter()
     rows: dict[str, list] = {"obs": [], "follower": [], "candidates": [], "scores": [],
                              "chosen": []}  # fmt: skip
-    follower_score = None
     while True:
         cands, scores, k = oracle.choose(obs, info)
-        follower_score = scores[0] if follower_score is None else follower_score
         for key, v in zip(rows, (obs, cands[0], cands, scores, k), strict=True):
             rows[key].append(np.asarray(v))
         obs, _, term, trunc, info = env.step(cands[k])
@@ -86,7 +84,8 @@ def label_episode(job: dict[str, Any]) -> dict[str, Any]:
     summary = {"index": job["index"], "seed": job["seed"], "family": family,
                "difficulty": job["difficulty"], "steps": len(rows["chosen"]),
                "deviations": int(sum(int(c) > 0 for c in rows["chosen"])),
-               "follower_score": float(follower_score), "oracle_score": float(info["score"]),
+               "follower_score": float(rows["scores"][0][0]),  # the first base rollout
+               "oracle_score": float(info["score"]),
                "rollouts": oracle.rollouts,
                "wall_s": round(time.perf_counter() - t0, 1)}  # fmt: skip
     path = Path(job["path"])
@@ -133,10 +132,11 @@ def label(out: Path, episodes: int, seed0: int, difficulty: list[float], familie
 
 
 def load_labels(out: Path) -> list[dict[str, np.ndarray]]:
+    """The finished label episodes of ``out/labels`` in index order (a ``.tmp.npz`` left
+    by an abandoned episode is not one)."""
+    paths = [p for p in (out / "labels").glob("ep_*.npz") if not p.name.endswith(".tmp.npz")]
     eps = []
-    for path in sorted((out / "labels").glob("ep_*.npz"), key=lambda p: int(p.stem[3:])):
-        if path.name.endswith(".tmp.npz"):
-            continue
+    for path in sorted(paths, key=lambda p: int(p.stem[3:])):
         with np.load(path, allow_pickle=False) as d:
             ep = {k: d[k] for k in d.files}
         ep["summary"] = json.loads(str(ep["summary"]))
@@ -154,11 +154,12 @@ def targets(ep: dict[str, np.ndarray], scale: float, margin: float) -> np.ndarra
     return np.clip(r, -1.0, 1.0).astype(np.float32)
 
 
-def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
-        models: Path | None = None, limit: int | None = None) -> dict[str, Any]:  # fmt: skip
+def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: Path,
+        limit: int | None = None) -> dict[str, Any]:  # fmt: skip
     """Fit the distilled residual agent on the labels of ``out`` (module doc) and save it
-    in ``models`` (default ``out/model``), from the label episodes of index < ``limit``
-    if given (a learning curve in the number of labels); returns the fit report."""
+    in ``models`` as ``ppo_distil.zip`` and the files beside it, from the label episodes
+    of index < ``limit`` if given (a learning curve in the number of labels); returns the
+    fit report."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -200,6 +201,9 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
     def mean_action(obs: torch.Tensor) -> torch.Tensor:
         return policy.get_distribution(obs).distribution.mean
 
+    def mse(obs: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        return torch.mean((mean_action(obs) - target) ** 2)
+
     xt, yt = normalised(x), torch.as_tensor(y)
     xv = normalised(np.concatenate([e["obs"] for e in valid])) if valid else None
     yv = (
@@ -212,13 +216,13 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
     best = (math.inf, 0, copy.deepcopy(policy.state_dict()))
     for epoch in range(1, epochs + 1):
         for idx in torch.randperm(len(xt), generator=gen).split(64):
-            loss = torch.mean((mean_action(xt[idx]) - yt[idx]) ** 2)
+            loss = mse(xt[idx], yt[idx])
             opt.zero_grad()
             loss.backward()
             opt.step()
         if xv is not None:
             with torch.no_grad():  # early stopping on the held-out episodes
-                v = float(torch.mean((mean_action(xv) - yv) ** 2))
+                v = float(mse(xv, yv))
             if v < best[0]:
                 best = (v, epoch, copy.deepcopy(policy.state_dict()))
     if xv is not None:
@@ -227,14 +231,14 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int,
         report = {
             "episodes": len(eps), "train_states": len(xt),
             "epoch": best[1] if xv is not None else epochs,
-            "train_mse": float(torch.mean((mean_action(xt) - yt) ** 2)),
+            "train_mse": float(mse(xt, yt)),
             "train_zero_mse": float(torch.mean(yt**2)),
             "valid_states": 0 if xv is None else len(xv),
-            "valid_mse": None if xv is None else float(torch.mean((mean_action(xv) - yv) ** 2)),
+            "valid_mse": None if xv is None else float(mse(xv, yv)),
             "valid_zero_mse": None if yv is None else float(torch.mean(yv**2)),
         }  # fmt: skip
 
-    models = Path(models) if models is not None else out / "model"
+    models = Path(models)
     models.mkdir(parents=True, exist_ok=True)
     path = models / f"{NAME}.zip"
     model.save(str(path))
@@ -260,6 +264,7 @@ def validate(model_path: Path, n_routes: int = 4) -> dict[str, Any]:
     from policies import RouteFollower, load_policy
 
     from .common import VALIDATION_SEED0, env_settings, load_config, make_env
+    from .oracle import finish
 
     env_kwargs, max_steps = env_settings(load_config(CONFIG))
     env = make_env(env_kwargs, max_steps)
@@ -267,12 +272,9 @@ def validate(model_path: Path, n_routes: int = 4) -> dict[str, Any]:
     for name, pol in (("agent", load_policy(model_path, env=env)),
                       ("follower", RouteFollower.from_env(env))):  # fmt: skip
         for i in range(n_routes):
-            obs, _ = env.reset(seed=VALIDATION_SEED0 + i)
+            obs, info = env.reset(seed=VALIDATION_SEED0 + i)
             pol.reset(VALIDATION_SEED0 + i)
-            term = trunc = False
-            while not (term or trunc):
-                obs, _, term, trunc, info = env.step(pol.act(obs))
-            scores[name].append(float(info["score"]))
+            scores[name].append(finish(env, pol, obs, False, False, info))
     env.close()
     return {k: {"mean": float(np.mean(v)), "routes": v} for k, v in scores.items()}
 

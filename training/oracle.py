@@ -46,7 +46,8 @@ def candidates(action: Any, vbar_max: float, turns=DEFAULT_TURNS,
 
 
 def finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dict) -> float:
-    """Play the follower from here to the episode's end; the final score."""
+    """Play ``follower`` (any policy with ``act``) from here to the episode's end; the
+    final score."""
     while not (term or trunc):
         obs, _, term, trunc, info = env.step(follower.act(obs))
     return float(info["score"])
