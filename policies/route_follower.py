@@ -54,6 +54,7 @@ from collections import deque
 
 import numpy as np
 
+from cnt_env.task.geometry import inside_polygon, nearest_on_boundary
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
 
@@ -249,16 +250,6 @@ class RouteFollower:
         return action_from_flow(vbar, phi, self.vbar_max)
 
 
-def _inside(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd test of ``points`` (n, 2) against the polygon ``poly`` (k, 2)."""
-    a, b = poly, np.roll(poly, -1, axis=0)
-    x, z = points[:, :1], points[:, 1:]
-    crosses = (a[:, 1] > z) != (b[:, 1] > z)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xi = a[:, 0] + (z - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-    return (np.sum(crosses & (x < xi), axis=1) % 2) == 1
-
-
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:
     """``points`` (n, 2) of a route, each moved out of every keep-out polygon's
     neighbourhood: a point nearer a keep-out than ``reach`` (x, z) along the direction
@@ -268,17 +259,10 @@ def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3
     out = np.array(points, dtype=np.float64)
     for _ in range(sweeps):
         for poly in keepouts:
-            a = np.asarray(poly, dtype=np.float64)
-            ab = np.roll(a, -1, axis=0) - a
-            t = np.einsum("nkj,kj->nk", out[:, None, :] - a[None], ab) / np.einsum(
-                "kj,kj->k", ab, ab
-            )
-            q = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (n, k, 2)
-            d = np.hypot(q[..., 0] - out[:, None, 0], q[..., 1] - out[:, None, 1])
-            near = q[np.arange(len(out)), np.argmin(d, axis=1)]
+            near, _ = nearest_on_boundary(out, poly)
             v = out - near
             dist = np.hypot(*v.T)
-            inside = _inside(out, a)
+            inside = inside_polygon(out, poly)
             n = np.where(dist[:, None] > 1e-9, v / np.maximum(dist, 1e-9)[:, None], 0.0)
             n[inside] *= -1.0
             r = np.abs(n) @ reach

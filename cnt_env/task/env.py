@@ -27,6 +27,7 @@ from cnt_env.sim.stepper import SimulationError
 from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_state
 from cnt_env.task import raster, routes, settings
 from cnt_env.task import targets as targets_mod
+from cnt_env.task.geometry import nearest_on_polygons
 from cnt_env.task.routes import DEFAULT_HALF_WIDTH, Route
 from cnt_env.task.scoring import (
     COVERAGE_SPACING,
@@ -42,7 +43,6 @@ from cnt_env.task.spaces import (
     POSITION_BOUND,
     ObservationLayout,
     flow_from_action,
-    nearest_on_polygons,
     rod_features,
 )
 

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.task import geometry
 from cnt_env.task import targets as targets_mod
 
 __all__ = [
@@ -219,27 +220,6 @@ def _walk(points, verts, cum_s, width, jump, furthest):  # pragma: no cover - nu
 
 
 @njit(cache=True)
-def _count_in_polygons(points, polys, starts):  # pragma: no cover - numba
-    """Number of ``points`` inside any of the polygons (vertices ``polys``, polygon k
-    from ``starts[k]`` to ``starts[k + 1]``), by the even-odd rule."""
-    n = 0
-    for i in range(points.shape[0]):
-        px, pz = points[i, 0], points[i, 1]
-        for k in range(starts.shape[0] - 1):
-            a, b = starts[k], starts[k + 1]
-            inside = False
-            for j in range(a, b):
-                jj = j + 1 if j + 1 < b else a
-                x0, z0, x1, z1 = polys[j, 0], polys[j, 1], polys[jj, 0], polys[jj, 1]
-                if (z0 > pz) != (z1 > pz) and px < x0 + (pz - z0) * (x1 - x0) / (z1 - z0):
-                    inside = not inside
-            if inside:
-                n += 1
-                break
-    return n
-
-
-@njit(cache=True)
 def _mark_crossed(points, pads, hit):  # pragma: no cover - numba
     """Set ``hit[k]`` where the polyline ``points`` crosses pad segment k (pads (p, 2, 2))."""
     for k in range(pads.shape[0]):
@@ -283,13 +263,7 @@ class RouteScore:
         self.length = float(self.cum_s[-1])
         self.jump = PROGRESS_JUMP_WIDTHS * self.width
         self.pads = np.ascontiguousarray(np.reshape(pads, (-1, 2, 2)), dtype=np.float64)
-        polys = [np.asarray(k, dtype=np.float64) for k in keepouts]
-        self.keep_vertices = np.ascontiguousarray(
-            np.concatenate(polys) if polys else np.zeros((0, 2))
-        )
-        self.keep_starts = np.concatenate([[0], np.cumsum([len(k) for k in polys])]).astype(
-            np.int64
-        )
+        self.keep_vertices, self.keep_starts = geometry.pack(tuple(keepouts))
         wg, wp, wc = (float(x) for x in weights)
         self.weights = np.array([wg, wp if len(self.pads) else 0.0, wc])
         self.samples, self.sample_s = targets_mod.resample(self.waypoints, COVERAGE_SPACING)
@@ -309,7 +283,7 @@ class RouteScore:
         furthest = _walk(pts, self.waypoints, self.cum_s, self.width, self.jump, furthest)
         d = distances(pts, self.waypoints)
         n_in = int(np.count_nonzero(d <= self.width))
-        n_short = (_count_in_polygons(pts, self.keep_vertices, self.keep_starts)
+        n_short = (geometry.count_in_polygons(pts, self.keep_vertices, self.keep_starts)
                    if len(self.keep_starts) > 1 else 0)  # fmt: skip
         if len(self.pads):
             _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit)

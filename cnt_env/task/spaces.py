@@ -18,7 +18,6 @@ import numpy as np
 from gymnasium import spaces
 
 __all__ = [
-    "FAR",
     "LAID_RATIO_BOUND",
     "LEAN_HEIGHTS",
     "LEAN_HEIGHT_FRACTIONS",
@@ -26,15 +25,12 @@ __all__ = [
     "ObservationLayout",
     "action_from_flow",
     "flow_from_action",
-    "nearest_on_polygons",
     "rod_features",
     "trace_points",
 ]
 
 #: Bound (L_vb) of every position in the vector observation; values are clipped to it.
 POSITION_BOUND = 1000.0
-#: Offset observed for "no keep-out" (clipped to POSITION_BOUND in the observation).
-FAR = 1.0e6
 #: Bound of the laid-length / target-length ratio in the observation.
 LAID_RATIO_BOUND = 100.0
 #: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
@@ -113,23 +109,6 @@ def trace_points(xz: np.ndarray, k: int, window: float) -> np.ndarray:
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xz, axis=0).T))])
     at = s[-1] - window * (np.arange(k, 0, -1) / k)
     return np.column_stack([np.interp(at, s, xz[:, c]) for c in (0, 1)])
-
-
-def nearest_on_polygons(point: np.ndarray, polygons: tuple[np.ndarray, ...]) -> np.ndarray:
-    """The point of the polygons' boundaries nearest ``point`` (2,); ``point`` + FAR when
-    there is none."""
-    best, best_d = point + FAR, np.inf
-    for poly in polygons:
-        a = poly
-        b = np.roll(poly, -1, axis=0)
-        ab = b - a
-        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
-        q = a + t[:, None] * ab
-        d = np.hypot(*(q - point).T)
-        i = int(np.argmin(d))
-        if d[i] < best_d:
-            best, best_d = q[i], d[i]
-    return best
 
 
 @dataclass(frozen=True, eq=False)

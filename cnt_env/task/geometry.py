@@ -1,0 +1,104 @@
+"""Plane geometry of keep-out polygons, in the substrate plane (x, z), one home for it.
+
+A polygon is a (k, 2) float array of vertices (k >= 3), closed implicitly (the last
+vertex joins the first). Used by the score (trace points laid inside a keep-out are
+shorts), the observation (the keep-out point nearest the contact) and the route
+follower (its plan around keep-outs).
+
+* :func:`nearest_on_boundary`: for each of n points, the nearest point of one polygon's
+  boundary and its distance (the projection on each edge, clipped to the edge);
+* :func:`nearest_on_polygons`: the nearest boundary point over several polygons;
+* :func:`inside_polygon` / :func:`count_in_polygons` (polygons packed by :func:`pack`):
+  the even-odd rule (a point is inside when a ray along +x crosses the boundary an odd
+  number of times), in one compiled kernel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "FAR",
+    "count_in_polygons",
+    "inside_polygon",
+    "nearest_on_boundary",
+    "nearest_on_polygons",
+    "pack",
+]
+
+#: Offset returned by :func:`nearest_on_polygons` when there is no polygon (the
+#: observation clips it to spaces.POSITION_BOUND: "no keep-out").
+FAR = 1.0e6
+
+
+def nearest_on_boundary(points: np.ndarray, poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(near, dist)``: for each of ``points`` (n, 2), the nearest point (n, 2) of the
+    boundary of ``poly`` (k, 2) and its distance (n,)."""
+    a = np.asarray(poly, dtype=np.float64)
+    ab = np.roll(a, -1, axis=0) - a
+    # t of the projection on each edge a + t ab, clipped to the edge
+    t = np.einsum("nkj,kj->nk", points[:, None, :] - a[None], ab) / np.einsum("kj,kj->k", ab, ab)
+    q = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (n, k, 2)
+    d = np.hypot(q[..., 0] - points[:, None, 0], q[..., 1] - points[:, None, 1])
+    i = np.argmin(d, axis=1)
+    rows = np.arange(len(points))
+    return q[rows, i], d[rows, i]
+
+
+def nearest_on_polygons(point: np.ndarray, polygons: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The point of the polygons' boundaries nearest ``point`` (2,); ``point`` + FAR when
+    there is none."""
+    best, best_d = point + FAR, np.inf
+    for poly in polygons:
+        near, d = nearest_on_boundary(point[None], poly)
+        if d[0] < best_d:
+            best, best_d = near[0], d[0]
+    return best
+
+
+@njit(cache=True)
+def _inside_any(points, verts, starts, out):  # pragma: no cover - numba
+    """``out[i]`` = points[i] lies inside one of the polygons (vertices ``verts``, polygon
+    k from ``starts[k]`` to ``starts[k + 1]``), by the even-odd rule."""
+    for i in range(points.shape[0]):
+        px, pz = points[i, 0], points[i, 1]
+        out[i] = False
+        for k in range(starts.shape[0] - 1):
+            a, b = starts[k], starts[k + 1]
+            inside = False
+            for j in range(a, b):
+                jj = j + 1 if j + 1 < b else a
+                x0, z0, x1, z1 = verts[j, 0], verts[j, 1], verts[jj, 0], verts[jj, 1]
+                # the edge straddles the ray's z, and crosses it at x > px
+                if (z0 > pz) != (z1 > pz) and px < x0 + (pz - z0) * (x1 - x0) / (z1 - z0):
+                    inside = not inside
+            if inside:
+                out[i] = True
+                break
+
+
+def pack(polygons: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """``(verts, starts)``: the polygons' vertices stacked (m, 2) and where each begins,
+    with the total m at the end (the layout of :func:`count_in_polygons`)."""
+    if not polygons:
+        return np.zeros((0, 2)), np.zeros(1, dtype=np.int64)
+    verts = np.ascontiguousarray(np.concatenate(polygons), dtype=np.float64)
+    starts = np.concatenate([[0], np.cumsum([len(k) for k in polygons])]).astype(np.int64)
+    return verts, starts
+
+
+def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Boolean (n,): which of ``points`` (n, 2) lie inside ``poly`` (k, 2)."""
+    verts, starts = pack((poly,))
+    out = np.empty(len(points), dtype=np.bool_)
+    _inside_any(np.ascontiguousarray(points, dtype=np.float64), verts, starts, out)
+    return out
+
+
+def count_in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray) -> int:
+    """How many of ``points`` (n, 2) lie inside any of the polygons packed by :func:`pack`
+    (``verts``, ``starts``)."""
+    out = np.empty(len(points), dtype=np.bool_)
+    _inside_any(np.ascontiguousarray(points, dtype=np.float64), verts, starts, out)
+    return int(np.count_nonzero(out))

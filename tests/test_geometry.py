@@ -1,0 +1,55 @@
+"""Keep-out polygon geometry (cnt_env/task/geometry.py) against hand-worked cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cnt_env.task.geometry import (
+    FAR,
+    count_in_polygons,
+    inside_polygon,
+    nearest_on_boundary,
+    nearest_on_polygons,
+    pack,
+)
+
+SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+# an L: the square minus its upper-right quarter (concave at (5, 5))
+ELL = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [5.0, 5.0], [5.0, 10.0], [0.0, 10.0]])
+
+
+def test_inside_by_the_even_odd_rule_on_a_concave_polygon() -> None:
+    pts = np.array([[2.0, 2.0], [8.0, 2.0], [2.0, 8.0], [8.0, 8.0], [-1.0, 5.0], [12.0, 2.0]])
+    assert inside_polygon(pts, ELL).tolist() == [True, True, True, False, False, False]
+    # the vertex order does not matter
+    assert inside_polygon(pts, ELL[::-1]).tolist() == [True, True, True, False, False, False]
+
+
+def test_count_in_polygons_counts_a_point_in_two_polygons_once() -> None:
+    other = SQUARE + 5.0  # overlaps SQUARE on [5, 10]^2
+    pts = np.array([[7.0, 7.0], [2.0, 2.0], [13.0, 13.0], [20.0, 20.0]])
+    assert count_in_polygons(pts, *pack((SQUARE, other))) == 3
+    assert count_in_polygons(pts, *pack(())) == 0
+
+
+def test_nearest_on_boundary_projects_on_edges_and_corners() -> None:
+    pts = np.array([[5.0, -3.0], [13.0, 14.0], [5.0, 4.0], [7.0, 7.0]])
+    near, d = nearest_on_boundary(pts, ELL)
+    # below the bottom edge; beyond the corner (5, 10); inside, 1 below the concave
+    # corner (5, 5) and 4 above the bottom edge; outside, 2 from both inner edges
+    np.testing.assert_allclose(near[0], [5.0, 0.0])
+    assert d[0] == pytest.approx(3.0)
+    np.testing.assert_allclose(near[1], [5.0, 10.0])  # the vertex (5, 10), not (10, 5)
+    assert d[1] == pytest.approx(np.hypot(8.0, 4.0))
+    np.testing.assert_allclose(near[2], [5.0, 5.0])
+    assert d[2] == pytest.approx(1.0)
+    assert d[3] == pytest.approx(2.0)  # (7, 7) is outside, 2 above the edge z = 5
+
+
+def test_nearest_on_polygons_picks_the_nearest_polygon_and_far_without_any() -> None:
+    p = np.array([20.0, 5.0])
+    far_right, near_right = SQUARE + np.array([30.0, 0.0]), SQUARE + np.array([23.0, 0.0])
+    np.testing.assert_allclose(nearest_on_polygons(p, (SQUARE, far_right)), [10.0, 5.0])
+    np.testing.assert_allclose(nearest_on_polygons(p, (near_right, SQUARE)), [23.0, 5.0])
+    np.testing.assert_allclose(nearest_on_polygons(p, ()), p + FAR)
