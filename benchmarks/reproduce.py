@@ -27,6 +27,7 @@ import os
 import re
 import sys
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
@@ -395,6 +396,36 @@ def _match(rec: dict[str, Any], row: str, groups: dict[str, float]) -> bool:
     return rec["row"] == row and rec["groups"] == groups
 
 
+def log_invocation(out: Path, points: int, wall: float, jobs: int, dt_factor: float,
+                   argv: Sequence[str] | None) -> None:  # fmt: skip
+    """Append an invocation that ran points to ``out/invocations.jsonl`` (the summary lists
+    them: a resumed invocation that finds everything done records nothing)."""
+    rec = {
+        "finished": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "points": points,
+        "wall_s": round(wall), "jobs": jobs, "dt_factor": dt_factor,
+        "argv": list(sys.argv[1:] if argv is None else argv),
+    }  # fmt: skip
+    with (out / "invocations.jsonl").open("a") as fh:
+        fh.write(json.dumps(rec) + "\n")
+
+
+def invocations_text(out: Path) -> str:
+    """The table of the invocations that ran this folder's points (wall time, jobs)."""
+    path = out / "invocations.jsonl"
+    if not path.is_file():
+        return ""
+    lines = ["", "## Invocations that ran points", "",
+             "| finished (UTC) | points | dt_factor | jobs | wall s | arguments |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
+    for line in path.read_text().splitlines():
+        if line.strip():
+            r = json.loads(line)
+            dt = "default" if r["dt_factor"] is None else r["dt_factor"]
+            lines.append(f"| {r['finished']} | {r['points']} | {dt} | {r['jobs']} "
+                         f"| {r['wall_s']} | `{' '.join(r['argv'])}` |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
     every = [r for r in records if r["candidate"] == candidate]
     recs = [r for r in every if "|dt=" not in r["key"]]  # the default resolution
@@ -673,9 +704,12 @@ def main(argv: list[str] | None = None) -> int:
             if point_key(p, c, args.dt_factor) not in done]  # fmt: skip
     print(f"{len(todo)} points to run ({len(done)} already in {results})", flush=True)
     t0 = time.time()
+    n_run = 0
     import numpy as np
 
     def record(res: dict[str, Any]) -> None:
+        nonlocal n_run
+        n_run += 1
         rec = res["record"]
         with results.open("a") as fh:
             fh.write(json.dumps(rec) + "\n")
@@ -718,13 +752,13 @@ def main(argv: list[str] | None = None) -> int:
                 record(fut.result())
                 submit()
     wall = time.time() - t0
+    if n_run:
+        log_invocation(out, n_run, wall, args.jobs, args.dt_factor, argv)
     records = list(load_done(results).values())
     if args.study:
         (out / "study_table.md").write_text(study_table(records))
     for c in candidates:
-        text = summary(records, c)
-        if not args.remeasure:
-            text += f"\nWall time of this invocation: {wall:.0f} s with --jobs {args.jobs}.\n"
+        text = summary(records, c) + invocations_text(out)
         (out / f"summary_{c}.md").write_text(text)
         try:
             figures(records, c, out)

@@ -33,6 +33,11 @@ def test_quick_table_runs_and_resumes(tmp_path: Path, capsys) -> None:
     assert reproduce.main([*QUICK, "--out", str(tmp_path)]) == 0
     assert "0 points to run (3 already" in capsys.readouterr().out
     assert _records(tmp_path) == recs
+    # only the invocation that ran points is logged, and the summary lists it
+    logged = (tmp_path / "invocations.jsonl").read_text().splitlines()
+    assert len(logged) == 1 and json.loads(logged[0])["points"] == 3
+    text = (tmp_path / "summary_default.md").read_text()
+    assert "## Invocations that ran points" in text and "| 3 | default | 2 |" in text
 
 
 @pytest.mark.slow
