@@ -125,3 +125,24 @@ def test_fitted_agent_loads_as_a_residual_policy_and_acts_its_targets(tmp_path: 
         assert residual.ravel() == pytest.approx(fixed[0][1][0] / 0.6, abs=0.1)
     finally:
         env.close()
+
+
+def _nap(seconds: float) -> float:
+    import time
+
+    if seconds < 0:
+        raise ValueError("negative nap")
+    time.sleep(seconds)
+    return seconds
+
+
+def test_run_until_yields_what_finishes_and_abandons_the_rest_at_the_deadline() -> None:
+    import time
+
+    t0 = time.perf_counter()
+    # two quick tasks, then one that would hold a worker for 10 minutes
+    got = list(distil.run_until(_nap, [0.01, 0.02, 600.0], 2, t0 + 10.0))
+    assert sorted(got) == [0.01, 0.02]
+    assert time.perf_counter() - t0 < 300.0  # the long task was terminated, not awaited
+    with pytest.raises(ValueError, match="negative nap"):
+        list(distil.run_until(_nap, [-1.0], 1, time.perf_counter() + 60.0))

@@ -29,9 +29,11 @@ import argparse
 import copy
 import json
 import math
+import multiprocessing
+import queue
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -107,28 +109,33 @@ def label(out: Path, episodes: int, seed0: int, difficulty: list[float], familie
              "path": str(labels / f"ep_{i}.npz")}
             for i in range(episodes) if not (labels / f"ep_{i}.npz").is_file()]  # fmt: skip
     done = []
-    pool = ProcessPoolExecutor(max_workers=jobs)
-    running = {pool.submit(label_episode, j) for j in todo[:jobs]}
-    queue = todo[jobs:]
-    try:
-        while running:
-            left = deadline - time.perf_counter()
-            finished, running = wait(running, timeout=max(left, 0.0), return_when=FIRST_COMPLETED)
-            for fut in finished:
-                s = fut.result()
-                done.append(s)
-                print(json.dumps(s), flush=True)
-            if time.perf_counter() >= deadline:
-                break
-            while queue and len(running) < jobs:
-                running.add(pool.submit(label_episode, queue.pop(0)))
-    finally:
-        for fut in running:
-            fut.cancel()
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()  # an abandoned oracle episode must not hold the cores
-        pool.shutdown(wait=False, cancel_futures=True)
+    for s in run_until(label_episode, todo, jobs, deadline):
+        done.append(s)
+        print(json.dumps(s), flush=True)
     return done
+
+
+def run_until(fn: Callable[[Any], Any], items: list[Any], jobs: int,
+              deadline: float) -> Iterator[Any]:  # fmt: skip
+    """``fn(item)`` for each of ``items`` on ``jobs`` worker processes, in submission
+    order, yielding the results as they finish until ``deadline`` (perf_counter). Then
+    the pool is terminated: a task still running is abandoned and must not hold a core
+    past the budget. An exception in a task is raised here."""
+    results: queue.SimpleQueue = queue.SimpleQueue()
+    with multiprocessing.Pool(jobs) as pool:  # leaving the block terminates the workers
+        for item in items:
+            pool.apply_async(fn, (item,), callback=results.put, error_callback=results.put)
+        for _ in items:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                return
+            try:
+                res = results.get(timeout=left)
+            except queue.Empty:
+                return
+            if isinstance(res, BaseException):
+                raise res
+            yield res
 
 
 def load_labels(out: Path) -> list[dict[str, np.ndarray]]:
