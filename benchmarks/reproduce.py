@@ -4,7 +4,7 @@ configuration study.
 
     python benchmarks/reproduce.py [--jobs 2] [--backend local|ray] [--quick] [--only ROW]
                                    [--candidate NAME] [--out DIR] [--dt-factor F]
-                                   [--max-wall S]
+                                   [--max-wall S] [--point K=V[,K=V]] [--seeds 0,1,2]
 
 Resumable: every finished point is one JSON line in ``DIR/results.jsonl``; points already
 there (same key: the point, its mesh and Newton tolerance) are skipped. Parallel over a
@@ -14,7 +14,11 @@ local backend only). The whole default table: 28 points in ~13 min with ``--jobs
 end it writes ``DIR/summary.md`` (model against paper wherever the paper gives a number)
 and figures ``DIR/*.png``. ``--candidate`` runs the rows with one of the named model
 configurations of CANDIDATES (the configuration study); the default is the configuration
-``default_config`` carries (presets.py). Uses the library directly (no CLI).
+``default_config`` carries (presets.py). ``--point`` picks single points by their
+groups; ``--seeds`` runs each point once per seed of the start-up perturbation, and the
+summary then gives the seeds' spread and judges a change of the step against it (a
+pattern that scatters with its start-up is converged in dt when its mean moves less than
+the seeds' standard error says it may). Uses the library directly (no CLI).
 """
 
 from __future__ import annotations
@@ -149,8 +153,8 @@ SERP = "serpentine"
 COIL = "coil"
 
 
-def _pt(row: str, preset: str, run: tuple[float, float] | None = None,
-        **groups: Any) -> dict[str, Any]:  # fmt: skip
+def _point(row: str, preset: str, run: tuple[float, float] | None = None,
+           **groups: Any) -> dict[str, Any]:  # fmt: skip
     """A point: ``groups`` changed from the preset; ``run`` = (deposit, transient) L_vb
     when the point needs a longer run than the preset's (``--deposit`` overrides it)."""
     point: dict[str, Any] = {"row": row, "preset": preset, "groups": groups}
@@ -159,14 +163,35 @@ def _pt(row: str, preset: str, run: tuple[float, float] | None = None,
     return point
 
 
-def rows(quick: bool = False) -> dict[str, list[dict[str, Any]]]:
-    """The points of each row (dimensionless groups changed from the preset)."""
+#: L_vb each serpentine point deposits: the pattern classes need >= 10 cycles to call a
+#: serpentine periodic (patterns.MeasureOptions.periodic_min_cycles), and at the preset's
+#: 1500 L_vb the baseline lays 7 (a cycle is ~4A + lambda of trace: ~170 L_vb at A = 41)
+#: and v̄ = 0.019 only 5, so most points came out "too_short". 4000 gives ~2.9x the
+#: measured cycles; ``--serpentine-run 1500`` is the preset's length (the Δt and seed
+#: studies of benchmarks/results/reproduce_1500 ran at it).
+SERPENTINE_RUN = 4000.0
+
+
+def rows(quick: bool = False, serpentine_run: float = SERPENTINE_RUN
+         ) -> dict[str, list[dict[str, Any]]]:  # fmt: skip
+    """The points of each row (dimensionless groups changed from the preset); serpentine
+    points deposit ``serpentine_run`` L_vb (the preset's transient dropped)."""
+    from cnt_env.presets import RUN_DEPOSIT, RUN_TRANSIENT
+
     if quick:
         return {
-            "coil": [_pt("coil", COIL)],
-            "vbar": [_pt("vbar", SERP, vbar=v) for v in (0.037, 0.12)],
-            "phi": [_pt("phi", SERP, phi=1.2)],
+            "coil": [_point("coil", COIL)],
+            "vbar": [_point("vbar", SERP, vbar=v) for v in (0.037, 0.12)],
+            "phi": [_point("phi", SERP, phi=1.2)],
         }
+    serp_run = None  # the preset's run (and the point keys it had)
+    if serpentine_run != RUN_DEPOSIT[SERP]:
+        serp_run = (serpentine_run, RUN_TRANSIENT[SERP])
+
+    def _pt(row: str, preset: str, run: tuple[float, float] | None = None,
+            **groups: Any) -> dict[str, Any]:  # fmt: skip
+        return _point(row, preset, serp_run if preset == SERP else run, **groups)
+
     # in priority order: a run cut short by --max-wall has the paper's headline rows
     out: dict[str, list[dict[str, Any]]] = {}
     out["coil"] = [_pt("coil", COIL)]
@@ -190,16 +215,17 @@ def rows(quick: bool = False) -> dict[str, list[dict[str, Any]]]:
 
 #: the study's screening rows (issue 12: v row, phi row, kappa_c row), most telling first
 STUDY_POINTS = (
-    [_pt("vbar", SERP, vbar=v) for v in (0.019, 0.12)]
-    + [_pt("phi", SERP, phi=1.2), _pt("vbar", SERP, vbar=0.037)]
-    + [_pt("vbar", SERP, vbar=0.07), _pt("phi", SERP, phi=0.87), _pt("phi", SERP, phi=0.44)]
-    + [_pt("phase", SERP, kappa_c_bar=k, vbar=0.037) for k in (0.1, 0.15)]
+    [_point("vbar", SERP, vbar=v) for v in (0.019, 0.12)]
+    + [_point("phi", SERP, phi=1.2), _point("vbar", SERP, vbar=0.037)]
+    + [_point("vbar", SERP, vbar=0.07)]
+    + [_point("phi", SERP, phi=f) for f in (0.87, 0.44)]
+    + [_point("phase", SERP, kappa_c_bar=k, vbar=0.037) for k in (0.1, 0.15)]
 )
 #: the discretisation finding: the baseline at finer delta (uniform 0.5; graded 0.125 near
 #: the contact as on the coil preset, 1 above)
 DELTA_POINTS = [
-    _pt("delta", SERP, delta_bar=0.5),
-    _pt("delta", SERP, delta_bar=0.125, coarse_delta=1.0),
+    _point("delta", SERP, delta_bar=0.5),
+    _point("delta", SERP, delta_bar=0.125, coarse_delta=1.0),
 ]
 
 #: What the paper gives (docs/model.md §6): (row, key) -> (quantity, value, note)
@@ -240,16 +266,19 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
     return default_config(point["preset"], **changes)
 
 
-def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None) -> str:
+def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
+              seed: int = 0) -> str:  # fmt: skip
     """The point's name in results.jsonl; it names the mesh and Newton tolerance it ran
-    with, so a change of either default runs the point again."""
+    with, so a change of either default runs the point again, and a seed other than 0
+    (the seeded start-up perturbation)."""
     g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
     if "run" in point:
         g += "|run={:g}-{:g}".format(*point["run"])
     dt = "" if dt_factor is None else f"|dt={dt_factor:g}"
     cfg = point_config(point, candidate, dt_factor)
     mesh = f"coarse={cfg.coarse_delta or 0:g},fine={cfg.fine_length:g}"
-    return f"{candidate}|{point['preset']}|{g}{dt}|{mesh},tol={cfg.newton.residual_tol:g}"
+    sd = f"|seed={seed}" if seed else ""
+    return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}"
 
 
 def run_point(
@@ -293,8 +322,9 @@ def run_point(
         return None if isinstance(x, float) and not math.isfinite(x) else x
 
     rec = {
-        "key": point_key(point, candidate, dt_factor),
+        "key": point_key(point, candidate, dt_factor, seed),
         "row": point["row"],
+        "seed": seed,
         "preset": preset,
         "candidate": candidate,
         "groups": point["groups"],
@@ -428,7 +458,8 @@ def invocations_text(out: Path) -> str:
 
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
     every = [r for r in records if r["candidate"] == candidate]
-    recs = [r for r in every if "|dt=" not in r["key"]]  # the default resolution
+    # the default step and seed 0; the other seeds have their own section
+    recs = [r for r in every if "|dt=" not in r["key"] and "|seed=" not in r["key"]]
     lines = [f"# Reproduction: candidate `{candidate}`", ""]
     lines += [
         "## Model against paper",
@@ -460,7 +491,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
             f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
             f"{r['wall_s']} | {r['error'] or ''} |"
         )
-    other = [r for r in every if "|dt=" in r["key"]]
+    other = [r for r in every if "|dt=" in r["key"] and "|seed=" not in r["key"]]
     if other:
         lines += ["", "## Other time steps (same points, dt_factor changed)", "",
                   "| row | point | dt_factor | class | A | lambda_x | R0 | A change | "
@@ -496,9 +527,69 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
         for dt, (w, where) in sorted(worst.items()):
             lines.append(f"Largest change at dt_factor {dt:g} (A and lambda_x of serpentines, "
                          f"R0 of coils): {100 * w:.1f}% ({where}).")  # fmt: skip
+    lines += seeds_section(every)
     total = sum(r["wall_s"] for r in recs)
     lines += ["", f"Sum of per-point wall times: {total:.0f} s ({len(recs)} points)."]
     return "\n".join(lines) + "\n"
+
+
+def _spread(values: list[Any]) -> tuple[float, float, int]:
+    """(mean, sample sd, n) of the finite values (nan, nan, 0 when there are none)."""
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    if not v:
+        return math.nan, math.nan, 0
+    mean = sum(v) / len(v)
+    sd = math.sqrt(sum((x - mean) ** 2 for x in v) / (len(v) - 1)) if len(v) > 1 else 0.0
+    return mean, sd, len(v)
+
+
+def seeds_section(every: list[dict[str, Any]]) -> list[str]:
+    """Points run with several seeds: the seeds' spread at each step, and the change of
+    the mean against the default step, judged against two standard errors of the
+    difference of the means (a pattern whose measures scatter with the start-up
+    perturbation is converged in the step when its mean moves less than that)."""
+    groups: dict[str, dict[float, list[dict[str, Any]]]] = {}
+    for r in every:
+        point = re.sub(r"\|(dt|seed)=[^|]*", "", r["key"])
+        groups.setdefault(point, {}).setdefault(r["dt_factor"], []).append(r)
+    multi = {k: v for k, v in groups.items() if any(len(rs) > 1 for rs in v.values())}
+    if not multi:
+        return []
+    lines = ["", "## Seeds: the start-up perturbation's spread, and the step against it", "",
+             "Measures of the point's kind (A and lambda_x of a serpentine, R0 of a coil): "
+             "mean +- sample sd over the seeds (n: seeds with a value). The change of the "
+             "mean against the default step is 'within' when it is below two standard "
+             "errors of the difference.", "",
+             "| row | point | dt_factor | seeds | classes | A | lambda_x | R0 | change of the "
+             "mean | within 2 SE? |", "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for _, by_dt in sorted(multi.items()):
+        first = next(iter(by_dt.values()))[0]
+        kind = ("coil_radius",) if first["preset"] == COIL else ("amplitude", "wavelength_x")
+        g = ", ".join(f"{k}={v:g}" for k, v in first["groups"].items()) or "baseline"
+        default_dt = min(by_dt, key=lambda dt: ("|dt=" in by_dt[dt][0]["key"], dt))
+        base = {k: _spread([r.get(k) for r in by_dt[default_dt]]) for k in kind}
+        for dt, rs in sorted(by_dt.items()):
+            classes: dict[str, int] = {}
+            for r in rs:
+                classes[r["pattern"]] = classes.get(r["pattern"], 0) + 1
+            cells, changes, verdicts = [], [], []
+            for k in ("amplitude", "wavelength_x", "coil_radius"):
+                m, sd, n = _spread([r.get(k) for r in rs])
+                cells.append(f"{m:.2f} +- {sd:.2f} ({n})" if n and k in kind else "")
+                if k not in kind or dt == default_dt:
+                    continue
+                m0, sd0, n0 = base[k]
+                if not (n and n0):
+                    changes.append(f"{k}: n/a")
+                    continue
+                se = math.sqrt(sd * sd / n + sd0 * sd0 / n0)
+                changes.append(f"{k} {100 * (m / m0 - 1):+.1f}%")
+                verdicts.append("yes" if abs(m - m0) <= 2 * se else "no")
+            cls = ", ".join(f"{c} {k}" for c, k in sorted(classes.items()))
+            lines.append(f"| {first['row']} | {first['preset']} {g} | {dt:g} | "
+                         f"{len(rs)} | {cls} | " + " | ".join(cells)
+                         + f" | {'; '.join(changes)} | {', '.join(verdicts)} |")  # fmt: skip
+    return lines
 
 
 def _get(recs: list[dict[str, Any]], **want: float) -> dict[str, Any] | None:
@@ -595,7 +686,10 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     recs = [
         r
         for r in records
-        if r["candidate"] == candidate and r["preset"] == SERP and "|dt=" not in r["key"]
+        if r["candidate"] == candidate
+        and r["preset"] == SERP
+        and "|dt=" not in r["key"]
+        and "|seed=" not in r["key"]
     ]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
@@ -655,6 +749,18 @@ def main(argv: list[str] | None = None) -> int:
                          "(the [ray] extra)")  # fmt: skip
     ap.add_argument("--quick", action="store_true", help="a handful of short points (CI)")
     ap.add_argument("--only", action="append", help="run only this row (repeatable)")
+    ap.add_argument("--point", action="append", metavar="K=V[,K=V]",
+                    help="run only the points whose changed groups are exactly these, e.g. "
+                         "Hbar=250 or kappa_c_bar=0.1,vbar=0.037 (repeatable)")  # fmt: skip
+    ap.add_argument("--serpentine-run", type=float, default=SERPENTINE_RUN,
+                    help=f"L_vb per serpentine point of the table (default {SERPENTINE_RUN:g}; "
+                         "1500, the preset's run, gives the keys of reproduce_1500)")  # fmt: skip
+    ap.add_argument(
+        "--seeds",
+        default="0",
+        help="comma-separated seeds of the start-up perturbation; every point "
+        "runs once per seed (default 0; the summary gives the seeds' spread)",
+    )
     ap.add_argument("--study", action="store_true", help="the configuration-study points")
     ap.add_argument("--delta", action="store_true", help="the delta finding points")
     ap.add_argument(
@@ -686,12 +792,25 @@ def main(argv: list[str] | None = None) -> int:
     elif args.study:
         table = {"study": list(STUDY_POINTS)[: args.study_points]}
     else:
-        table = rows(args.quick)
+        table = rows(args.quick, args.serpentine_run)
     if args.only:
         unknown = set(args.only) - set(table)
         if unknown:
             ap.error(f"unknown row(s) {sorted(unknown)}; choose from {sorted(table)}")
         table = {k: v for k, v in table.items() if k in args.only}
+    if args.point:
+        try:
+            wanted = [{k: float(v) for k, v in (kv.split("=") for kv in spec.split(","))}
+                      for spec in args.point]  # fmt: skip
+        except ValueError:
+            ap.error(f"--point takes K=V[,K=V], got {args.point}")
+        table = {k: [p for p in v if p["groups"] in wanted] for k, v in table.items()}
+        if not any(table.values()):
+            ap.error(f"no point of the table has the groups {args.point}")
+    try:
+        seeds = [int(x) for x in args.seeds.split(",")]
+    except ValueError:
+        ap.error(f"--seeds takes comma-separated integers, got {args.seeds!r}")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
@@ -700,8 +819,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"re-measured {remeasure(out)} points", flush=True)
         table = {}
     done = load_done(results)
-    todo = [(p, c) for c in candidates for row in table.values() for p in row
-            if point_key(p, c, args.dt_factor) not in done]  # fmt: skip
+    todo = [(p, c, sd) for c in candidates for row in table.values() for p in row
+            for sd in seeds if point_key(p, c, args.dt_factor, sd) not in done]  # fmt: skip
     print(f"{len(todo)} points to run ({len(done)} already in {results})", flush=True)
     t0 = time.time()
     n_run = 0
@@ -727,7 +846,7 @@ def main(argv: list[str] | None = None) -> int:
             if run_point.__module__ != "__main__":  # imported: ship it by value all the same
                 ray.cloudpickle.register_pickle_by_value(sys.modules[run_point.__module__])
             task = ray.remote(num_cpus=1, max_retries=0)(run_point)
-            pending = [task.remote(p, c, args.dt_factor, deposit) for p, c in todo]
+            pending = [task.remote(p, c, args.dt_factor, deposit, sd) for p, c, sd in todo]
             while pending:
                 finished, pending = ray.wait(pending, num_returns=1)
                 record(ray.get(finished[0]))
@@ -742,8 +861,8 @@ def main(argv: list[str] | None = None) -> int:
                     if args.max_wall is not None and time.time() - t0 > args.max_wall:
                         queue.clear()
                         return
-                    p, c = queue.pop(0)
-                    running[pool.submit(run_point, p, c, args.dt_factor, deposit)] = (p, c)
+                    p, c, sd = queue.pop(0)
+                    running[pool.submit(run_point, p, c, args.dt_factor, deposit, sd)] = (p, c)
 
             submit()
             while running:

@@ -75,3 +75,33 @@ def test_summary_compares_other_time_steps_with_the_default_point() -> None:
     )
     coil_row = next(x for x in table.splitlines() if x.startswith("| coil | coil"))
     assert coil_row.endswith("|  |  | +0.4% |")  # a coil's A and lambda_x are not compared
+
+
+def test_seeds_section_judges_the_step_against_the_seeds_spread() -> None:
+    """Several seeds of a point: mean +- sd per step, and the change of the mean is
+    'within' only when it is below two standard errors of the difference."""
+    lines = (ROOT / "benchmarks/results/reproduce/results.jsonl").read_text().splitlines()
+    real = next(r for r in map(json.loads, lines) if r["groups"] == {"Hbar": 250.0})
+    key = real["key"]  # default|serpentine|Hbar=250|coarse=...
+
+    def rec(seed: int, dt: float | None, a: float, lam: float) -> dict:
+        k = key.replace("|coarse", ("" if dt is None else f"|dt={dt:g}")
+                        + (f"|seed={seed}" if seed else "") + "|coarse")  # fmt: skip
+        return {**real, "key": k, "dt_factor": dt or 0.05, "amplitude": a,
+                "wavelength_x": lam, "pattern": "periodic"}  # fmt: skip
+
+    # A: means 40 and 41, sd 1.63 over 4 seeds: 2 SE = 2.31, within; lambda_x: means 8
+    # and 10, sd 0.12: far outside
+    amps, wiggle = (38.0, 40.0, 42.0, 40.0), (0.1, -0.1, 0.1, -0.1)
+    recs = [rec(s, None, amps[s], 8.0 + wiggle[s]) for s in range(4)]
+    recs += [rec(s, 0.025, amps[s] + 1.0, 10.0 + wiggle[s]) for s in range(4)]
+    lines = reproduce.seeds_section(recs)
+    rows = [x for x in lines if x.startswith("| Hbar |")]
+    assert len(rows) == 2
+    default = next(x for x in rows if "| 0.05 |" in x)
+    half = next(x for x in rows if "| 0.025 |" in x)
+    assert "| 4 | periodic 4 | 40.00 +- 1.63 (4) | 8.00 +- 0.12 (4) |" in default
+    assert "amplitude +2.5%; wavelength_x +25.0% | yes, no |" in half
+    # the main tables see seed 0 at the default step alone
+    text = reproduce.summary(recs, "default")
+    assert "## Seeds" in text and "(1 points)" in text
