@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 
 from cnt_env.presets import MODEL, NEWTON
 from cnt_env.sim.forces import (
@@ -164,6 +165,35 @@ class DepositionConfig:
 
     def with_params(self, **changes: float) -> DepositionConfig:
         return replace(self, params=replace(self.params, **changes))
+
+
+@njit(cache=True)
+def _next_coarse(rest_lengths: np.ndarray, j: int, end: int, arc: float, fine_length: float,
+                 delta: float) -> tuple[int, float]:  # fmt: skip
+    """Walk edges j, j+1, ... < end adding their rest lengths to ``arc`` while it is below
+    ``fine_length``; return the first coarse edge met (round(l / delta) > 1) and the arc
+    before it, or -1. The operations of DepositionSim._refine's walk, in its order."""
+    while j < end and arc < fine_length:
+        if round(rest_lengths[j] / delta) > 1:
+            return j, arc
+        arc += rest_lengths[j]
+        j += 1
+    return -1, arc
+
+
+@njit(cache=True)
+def _n_beyond(rest_lengths: np.ndarray, n_deposited: int, tail_length: float) -> int:
+    """How many of the first ``n_deposited`` nodes lie more than ``tail_length`` of arc
+    behind the contact node (node ``n_deposited``): node i is sum(rest_lengths[i:
+    n_deposited]) behind, summed from the newest edge (as np.cumsum of the reversed
+    lengths, so the same bits)."""
+    behind = 0.0
+    count = 0
+    for i in range(n_deposited - 1, -1, -1):
+        behind += rest_lengths[i]
+        if behind > tail_length:
+            count += 1
+    return count
 
 
 class DepositionSim:
@@ -313,10 +343,12 @@ class DepositionSim:
         rod = self.rod
         arc = 0.0
         j = self.contact_node - 1
-        while j < rod.n_nodes - 1 and arc < self.config.fine_length:
-            n_sub = round(rod.rest_lengths[j] / self.delta)
-            if n_sub > 1:
-                rod.split_edge(j, n_sub)
+        while True:  # the walk over the fine edges is compiled (_next_coarse)
+            j, arc = _next_coarse(rod.rest_lengths, j, rod.n_nodes - 1, arc,
+                                  self.config.fine_length, self.delta)  # fmt: skip
+            if j < 0:
+                return
+            rod.split_edge(j, round(rod.rest_lengths[j] / self.delta))
             arc += rod.rest_lengths[j]
             j += 1
 
@@ -328,8 +360,7 @@ class DepositionSim:
         if self.substrate.tail_length == math.inf:
             extra = self.n_deposited - self.substrate.keep_deposited
         else:
-            behind = np.cumsum(rod.rest_lengths[: self.n_deposited][::-1])[::-1]
-            extra = int(np.count_nonzero(behind > self.substrate.tail_length))
+            extra = _n_beyond(rod.rest_lengths, self.n_deposited, self.substrate.tail_length)
             extra = min(extra, self.n_deposited - 2)
         if extra <= 0:
             return

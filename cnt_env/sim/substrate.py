@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from cnt_env.sim.stepper import Rod
 
@@ -137,19 +138,19 @@ class Stepped:
         """Apply the critical-curvature rule to every deposited edge not yet snapped."""
         q = rod.q
         count = 0
-        for j in range(n_deposited - 1):
-            if snapped[j]:
-                continue
+        j = 0
+        while True:  # the scan for edges past the rule is compiled (_next_to_snap)
+            j = _next_to_snap(q, rod.rest_lengths, snapped, j, n_deposited - 1, self.kappa_c)
+            if j < 0:
+                return count
             a, b = 4 * j, 4 * (j + 1)
             ex = q[b] - q[a]
             ez = q[b + 2] - q[a + 2]
-            if abs(ex) < self.kappa_c * rod.rest_lengths[j] * abs(ez):
-                if self._would_fold(q, j, math.copysign(1.0, ez), rod.n_nodes):
-                    continue
+            if not self._would_fold(q, j, math.copysign(1.0, ez), rod.n_nodes):
                 self._snap(rod, j, ex, ez)
                 snapped[j] = True
                 count += 1
-        return count
+            j += 1
 
     def _snap(self, rod: Rod, j: int, ex: float, ez: float) -> None:
         """Turn edge j (nodes j, j+1) along z by moving its newer node (see SNAP_OPTIONS)."""
@@ -188,6 +189,20 @@ class Stepped:
             if sz * e[2] / np.linalg.norm(e) < limit:
                 return True
         return False
+
+
+@njit(cache=True)
+def _next_to_snap(q: np.ndarray, rest_lengths: np.ndarray, snapped: np.ndarray, j: int,
+                  end: int, kappa_c: float) -> int:  # fmt: skip
+    """The first edge j' in [j, end) not yet snapped whose direction is within the
+    critical-curvature rule, |e_x| < kappa_c l |e_z| (docs/model.md §4), or -1."""
+    while j < end:
+        if not snapped[j]:
+            a, b = 4 * j, 4 * (j + 1)
+            if abs(q[b] - q[a]) < kappa_c * rest_lengths[j] * abs(q[b + 2] - q[a + 2]):
+                return j
+        j += 1
+    return -1
 
 
 Substrate = FlatSticky | Stepped
