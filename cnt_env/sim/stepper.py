@@ -226,10 +226,13 @@ def assemble(
     rhs: np.ndarray,
     tangents_old: np.ndarray,
     transport: bool,
+    fix_rows: bool = True,
 ) -> float:
     """Residual f (stored as rhs = -f, zero on fixed DOFs) and Jacobian J in band storage
     (identity rows on fixed DOFs). Returns max |f| over free DOFs (inf/NaN propagate).
-    ``transport``: J includes the frame-transport terms (exact; elastic.add_bend_twist)."""
+    ``transport``: J includes the frame-transport terms (exact; elastic.add_bend_twist).
+    ``fix_rows`` False leaves the fixed DOFs' rows and columns as assembled, for a caller
+    that drops them (:func:`gather_free`)."""
     n_dof = 4 * n_nodes - 1
     inv_dt2 = 1.0 / (dt * dt)
     for k in range(n_dof):
@@ -250,7 +253,8 @@ def assemble(
     for k in range(n_dof):
         if fixed[k]:
             rhs[k] = 0.0
-            band_fix_dof(ab, n_dof, k)
+            if fix_rows:
+                band_fix_dof(ab, n_dof, k)
             continue
         r = mass[k] * ((q[k] - q_old[k]) / dt - u_old[k]) / dt - force[k]  # docs/model.md §3
         ab[_DIAG, k] += mass[k] * inv_dt2
@@ -327,6 +331,20 @@ def residual(
 
 
 @njit(cache=True)
+def gather_free(ab: np.ndarray, free: np.ndarray, n_free: int, ab_r: np.ndarray) -> None:
+    """The band of J restricted to the free DOFs ``free[:n_free]`` (ascending), in
+    ``ab_r``: A_r[a, b] = A[free[a], free[b]]. Dropping the fixed DOFs' identity rows and
+    zeroed columns leaves the solution of the free DOFs unchanged, and the banded LU does
+    the same operations on the same non-zero entries in the same order (the mapping is
+    monotone, so every coupling stays within the band), so the same bits."""
+    for b in range(n_free):
+        cb = free[b]
+        for a in range(max(0, b - KU), min(n_free, b + KL + 1)):
+            d = free[a] - cb
+            ab_r[_DIAG + a - b, b] = ab[_DIAG + d, cb] if -KU <= d <= KL else 0.0
+
+
+@njit(cache=True)
 def newton_solve(
     q: np.ndarray,
     q_old: np.ndarray,
@@ -372,6 +390,9 @@ def newton_solve(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
+    ab_r: np.ndarray,
+    free: np.ndarray,
+    rhs_r: np.ndarray,
     check: bool = True,
     transport: bool = False,
 ) -> int:
@@ -386,8 +407,18 @@ def newton_solve(
     when it converges the Jacobian is not assembled, and when it does not, the full
     assembly follows. Either way every iterate, residual and Jacobian is the same, bit
     for bit, as with an assembly every iteration.
+
+    When DOFs are fixed, the linear solve runs on the free DOFs alone (``ab_r``, ``free``,
+    ``rhs_r``: :func:`gather_free`), which gives the same bits as the full system with
+    identity rows and is cheaper by the fixed share of the band.
     """
     n_dof = 4 * n_nodes - 1
+    n_free = 0
+    for k in range(n_dof):
+        if fixed[k] == 0:
+            free[n_free] = k
+            n_free += 1
+    reduced = n_free < n_dof
     status = MAX_ITERATIONS
     it = 0
     res = math.inf
@@ -417,18 +448,30 @@ def newton_solve(
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
                        flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
-                       sub_anchor, force, ab, rhs, tangents_old, transport)  # fmt: skip
+                       sub_anchor, force, ab, rhs, tangents_old, transport,
+                       not reduced)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
         if res <= tol_abs:
             status = CONVERGED
             break
-        if band_lu_factor(ab, n_dof, ipiv) != 0:
-            status = SINGULAR
-            break
+        if reduced:
+            gather_free(ab, free, n_free, ab_r)
+            for a in range(n_free):
+                rhs_r[a] = rhs[free[a]]
+            if band_lu_factor(ab_r, n_free, ipiv) != 0:
+                status = SINGULAR
+                break
+            band_lu_solve(ab_r, n_free, ipiv, rhs_r)
+            for a in range(n_free):  # the fixed DOFs keep rhs = 0: a zero update
+                rhs[free[a]] = rhs_r[a]
+        else:
+            if band_lu_factor(ab, n_dof, ipiv) != 0:
+                status = SINGULAR
+                break
+            band_lu_solve(ab, n_dof, ipiv, rhs)
         n_factor += 1
-        band_lu_solve(ab, n_dof, ipiv, rhs)
         du = 0.0
         for k in range(n_dof):
             q[k] += rhs[k]
@@ -496,6 +539,9 @@ def implicit_step(
     ipiv: np.ndarray,
     rhs: np.ndarray,
     out_stats: np.ndarray,
+    ab_r: np.ndarray,
+    free: np.ndarray,
+    rhs_r: np.ndarray,
     check: bool,
     transport: bool,
 ) -> int:
@@ -518,8 +564,8 @@ def implicit_step(
         k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
         c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
         update_tol * min_rest, max_iter, tangents, lengths,
-        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, check,
-        transport,
+        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
+        free, rhs_r, check, transport,
     )  # fmt: skip
     if status != CONVERGED:
         for k in range(n_dof):
@@ -641,6 +687,9 @@ class Rod:
                 arr[:m] = prev[:m]
             setattr(self, name, arr)
         self._ab = band_alloc(n_dof_cap)
+        self._ab_r = band_alloc(n_dof_cap)  # the free DOFs' system (gather_free)
+        self._free = np.zeros(n_dof_cap, dtype=np.int64)
+        self._rhs_r = np.zeros(n_dof_cap)
         self._stats = np.zeros(4)
         self.max_nodes = cap
 
@@ -854,7 +903,7 @@ class Rod:
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
-            o.residual_check, o.exact_jacobian,
+            self._ab_r, self._free, self._rhs_r, o.residual_check, o.exact_jacobian,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
