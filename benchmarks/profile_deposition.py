@@ -67,7 +67,8 @@ class Probe:
 
 def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
     """Median µs of one assembly (frames + residual + Jacobian) and one LU (factor +
-    solve) on a copy of the rod's current state."""
+    solve; with fixed DOFs, as newton_solve does it: the gather of the free DOFs' band
+    and the LU of that) on a copy of the rod's current state."""
     n = rod.n_nodes
     nd = rod.n_dof
     q_old = rod.q.copy()
@@ -78,6 +79,9 @@ def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
     ab = rod._ab
     rhs = rod._rhs
     ipiv = rod._ipiv
+    free = np.flatnonzero(rod.fixed[:nd] == 0).astype(np.int64)
+    reduced = len(free) < nd
+    rhs_r = np.zeros(nd)
 
     def asm():
         stepper.update_frames(q, n, rod.tangents_old, rod.d1_old, rod.ref_twist_old,
@@ -88,11 +92,17 @@ def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
                          rod._twist, rod.ext_force, rod.drag_on, rod.flow, d.mu, d.sigma,
                          d.c_sigma, d.law_code, rod.vdw, rod.sub_friction, rod.sub_stiffness,
                          rod.sub_anchor, rod._force, ab, rhs, rod.tangents_old,
-                         rod.options.exact_jacobian)  # fmt: skip
+                         rod.options.exact_jacobian, not reduced)  # fmt: skip
 
     def lu():
-        band_lu_factor(ab, nd, ipiv)
-        band_lu_solve(ab, nd, ipiv, rhs)
+        if reduced:
+            stepper.gather_free(ab, free, len(free), rod._ab_r)
+            rhs_r[: len(free)] = rhs[free]
+            band_lu_factor(rod._ab_r, len(free), ipiv)
+            band_lu_solve(rod._ab_r, len(free), ipiv, rhs_r)
+        else:
+            band_lu_factor(ab, nd, ipiv)
+            band_lu_solve(ab, nd, ipiv, rhs)
 
     out = {}
     for key, fn in (("assemble_us", asm), ("lu_us", None)):
@@ -109,6 +119,7 @@ def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
         out[key] = round(1e6 * statistics.median(times), 1)
     out["n_nodes"] = n
     out["n_dof"] = nd
+    out["n_free"] = len(free)
     out["assembly_share"] = round(out["assemble_us"] / (out["assemble_us"] + out["lu_us"]), 3)
     return out
 

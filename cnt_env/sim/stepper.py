@@ -6,7 +6,8 @@ Residual (per DOF), with u = (q - q_n)/dt:
     J    = M/dt^2 + Hess E - dF_ext/dq          (dF/dq = (dF/du)/dt for drag)
 
 J is assembled straight into LAPACK band storage and solved with the pivoted banded LU
-of ``banded.py``. Fixed DOFs get identity rows and a zero update. A step converges when
+of ``banded.py``. Fixed DOFs get a zero update: the solve runs on the free DOFs' band
+alone (:func:`gather_free`; the same bits as identity rows in the full band). A step converges when
 the free-DOF residual is below ``residual_tol * force_scale`` (force units; e_v in the
 dimensionless model) or the update is below ``update_tol * length_scale``. A failed step
 is rewound and retried as two half steps, recursively, down to ``max_halvings``; past
