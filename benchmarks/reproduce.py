@@ -426,7 +426,7 @@ def _match(rec: dict[str, Any], row: str, groups: dict[str, float]) -> bool:
     return rec["row"] == row and rec["groups"] == groups
 
 
-def log_invocation(out: Path, points: int, wall: float, jobs: int, dt_factor: float,
+def log_invocation(out: Path, points: int, wall: float, jobs: int, dt_factor: float | None,
                    argv: Sequence[str] | None) -> None:  # fmt: skip
     """Append an invocation that ran points to ``out/invocations.jsonl`` (the summary lists
     them: a resumed invocation that finds everything done records nothing)."""
@@ -456,10 +456,20 @@ def invocations_text(out: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _other_step(rec: dict[str, Any]) -> bool:
+    """The record ran at a --dt-factor other than the default (its key says so)."""
+    return "|dt=" in rec["key"]
+
+
+def _other_seed(rec: dict[str, Any]) -> bool:
+    """The record ran at a seed other than 0 (its key says so)."""
+    return "|seed=" in rec["key"]
+
+
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
     every = [r for r in records if r["candidate"] == candidate]
     # the default step and seed 0; the other seeds have their own section
-    recs = [r for r in every if "|dt=" not in r["key"] and "|seed=" not in r["key"]]
+    recs = [r for r in every if not _other_step(r) and not _other_seed(r)]
     lines = [f"# Reproduction: candidate `{candidate}`", ""]
     lines += [
         "## Model against paper",
@@ -491,7 +501,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
             f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
             f"{r['wall_s']} | {r['error'] or ''} |"
         )
-    other = [r for r in every if "|dt=" in r["key"] and "|seed=" not in r["key"]]
+    other = [r for r in every if _other_step(r) and not _other_seed(r)]
     if other:
         lines += ["", "## Other time steps (same points, dt_factor changed)", "",
                   "| row | point | dt_factor | class | A | lambda_x | R0 | A change | "
@@ -566,7 +576,7 @@ def seeds_section(every: list[dict[str, Any]]) -> list[str]:
         first = next(iter(by_dt.values()))[0]
         kind = ("coil_radius",) if first["preset"] == COIL else ("amplitude", "wavelength_x")
         g = ", ".join(f"{k}={v:g}" for k, v in first["groups"].items()) or "baseline"
-        default_dt = min(by_dt, key=lambda dt: ("|dt=" in by_dt[dt][0]["key"], dt))
+        default_dt = min(by_dt, key=lambda dt: (_other_step(by_dt[dt][0]), dt))
         base = {k: _spread([r.get(k) for r in by_dt[default_dt]]) for k in kind}
         for dt, rs in sorted(by_dt.items()):
             classes: dict[str, int] = {}
@@ -688,8 +698,8 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
         for r in records
         if r["candidate"] == candidate
         and r["preset"] == SERP
-        and "|dt=" not in r["key"]
-        and "|seed=" not in r["key"]
+        and not _other_step(r)
+        and not _other_seed(r)
     ]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)

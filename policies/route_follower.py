@@ -259,9 +259,8 @@ def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3
     out = np.array(points, dtype=np.float64)
     for _ in range(sweeps):
         for poly in keepouts:
-            near, _ = nearest_on_boundary(out, poly)
+            near, dist = nearest_on_boundary(out, poly)
             v = out - near
-            dist = np.hypot(*v.T)
             inside = inside_polygon(out, poly)
             n = np.where(dist[:, None] > 1e-9, v / np.maximum(dist, 1e-9)[:, None], 0.0)
             n[inside] *= -1.0
