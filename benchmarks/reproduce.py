@@ -268,9 +268,9 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
 
 def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
               seed: int = 0) -> str:  # fmt: skip
-    """The point's name in results.jsonl; it names the mesh and Newton tolerance it ran
-    with, so a change of either default runs the point again, and a seed other than 0
-    (the seeded start-up perturbation)."""
+    """The point's name in results.jsonl; it names the mesh, Newton tolerance and length
+    projection it ran with, so a change of any of these defaults runs the point again, and
+    a seed other than 0 (the seeded start-up perturbation)."""
     g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
     if "run" in point:
         g += "|run={:g}-{:g}".format(*point["run"])
@@ -278,7 +278,9 @@ def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
     cfg = point_config(point, candidate, dt_factor)
     mesh = f"coarse={cfg.coarse_delta or 0:g},fine={cfg.fine_length:g}"
     sd = f"|seed={seed}" if seed else ""
-    return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}"
+    proj = cfg.newton.length_projection  # named when on (records before it ran without)
+    pj = f",proj={proj:g}" if proj else ""
+    return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}{pj}"
 
 
 def run_point(

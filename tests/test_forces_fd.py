@@ -60,15 +60,41 @@ def test_linear_drag_jacobian(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_printed_drag_velocity_jacobian(seed: int) -> None:
-    """Exact in the velocity; the tangent's q-dependence is left out by design, so compare
-    with the FD Jacobian taken with the tangent frozen (move q and q_old together along
-    the edge-preserving direction is not possible; instead vary q_old, which only enters
-    through the velocity: dF/dq_old = -dF/dq|_velocity)."""
+def test_printed_drag_jacobian(seed: int) -> None:
+    """Exact in q: the velocity part and the tangent's q-dependence (geometric part)."""
     q, q_old, rest, dt, flow, on = _setup(seed)
     _, jac = _force_and_jac(add_printed_drag, q, q_old, rest, dt, flow, on)
-    fd_old = _fd_jac(lambda x: _force_and_jac(add_printed_drag, q, x, rest, dt, flow, on)[0], q_old)
-    assert np.max(np.abs(jac - fd_old)) < JAC_RTOL * np.max(np.abs(jac))
+    fd = _fd_jac(lambda x: _force_and_jac(add_printed_drag, x, q_old, rest, dt, flow, on)[0], q)
+    assert np.max(np.abs(jac + fd)) < JAC_RTOL * np.max(np.abs(jac))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_printed_drag_jacobian_in_a_strong_flow(seed: int) -> None:
+    """|v_r| dt >> |e| (the env's regime): the geometric part dominates and is exact."""
+    q, q_old, rest, _, _, on = _setup(seed)
+    dt, flow = 30.0, np.array([0.13, 0.0, 0.05])
+    _, jac = _force_and_jac(add_printed_drag, q, q_old, rest, dt, flow, on)
+    fd = _fd_jac(lambda x: _force_and_jac(add_printed_drag, x, q_old, rest, dt, flow, on)[0], q)
+    assert np.max(np.abs(jac + fd)) < JAC_RTOL * np.max(np.abs(jac))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_printed_drag_z_only_edges_keep_their_z_entries(seed: int) -> None:
+    """With nodes fixed in x and y only the z-z entries are assembled, and they are the
+    full Jacobian's."""
+    q, q_old, rest, dt, flow, on = _setup(seed)
+    n = q.size
+    fixed = np.zeros(n, dtype=np.uint8)
+    fixed[0:2] = fixed[4:6] = fixed[8:10] = 1  # nodes 0-2 fixed in x, y
+    full = np.zeros(n), np.zeros((LDAB, n))
+    part = np.zeros(n), np.zeros((LDAB, n))
+    for (f, ab), fx in ((full, NO_FIXED), (part, fixed)):
+        add_printed_drag(
+            q, q_old, dt, (n + 1) // 4, rest, on, flow, 1.3, 1.0, 2.29, f, ab, True, fx
+        )
+    free = np.flatnonzero(fixed == 0)
+    dense_full, dense_part = _dense(full[1], n), _dense(part[1], n)
+    np.testing.assert_array_equal(dense_part[np.ix_(free, free)], dense_full[np.ix_(free, free)])
 
 
 def test_printed_law_matches_linear_for_axial_and_normal_motion() -> None:

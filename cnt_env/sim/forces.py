@@ -231,20 +231,21 @@ def add_printed_drag(
 
     alpha the angle between v_r and the edge (cos alpha = |v_r.t|/|v_r|). It equals the
     linear law for purely axial or purely normal motion and is weaker in between. The
-    Jacobian holds the exact velocity part; the tangent's dependence on q is left out
-    (Newton then converges linearly in that term; the step is still implicit in v).
+    Jacobian is exact: the velocity part and the geometric part (the tangent's dependence
+    on q, which dominates the velocity part when |v_r| dt >> |e|, as in a strong flow).
     ``fixed``: as for :func:`add_linear_drag`.
     """
     t = np.empty(3)
     vr = np.empty(3)
     b = np.empty(3)
     jac = np.empty((3, 3))
+    dft = np.empty((3, 3))
     for j in range(n_nodes - 1):
         if not drag_on[j]:
             continue
         a = 4 * j
         c = a + 4
-        _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
+        ln = _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
         ax = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
         nb2 = 0.0
         for k in range(3):
@@ -267,11 +268,28 @@ def add_printed_drag(
                 dg = sigma * t[k] * (2.0 * abs(ax) * t[m] / nv - ax * abs(ax) * vr[m] / nv**3)
                 dh = c_sigma * ((b[k] * b[m] / nb + nb * pkm) / nv - nb * b[k] * vr[m] / nv**3)
                 jac[k, m] = coef * (dg + dh)
+        # geometric part, v_r fixed: dF/dt = coef/|v| [sigma (2|a| t v_r^T + a|a| I)
+        #   - C (a b b^T/|b| + |b| (t v_r^T + a I))]  (db/dt = -(t v_r^T + a I),
+        # d|b|/dt = -a b^T/|b| as b.t = 0), and dt/de = (I - t t^T)/|e|; half the edge
+        # force per node, so dF_node/dx_{j+1} = G = dF/dt (I - t t^T)/(2|e|) = -dF_node/dx_j
+        an = abs(ax)
+        for k in range(3):
+            for p in range(3):
+                eye = 1.0 if k == p else 0.0
+                tv = t[k] * vr[p] + ax * eye
+                dft[k, p] = coef * (sigma * (2.0 * an * t[k] * vr[p] + an * ax * eye)
+                                    - c_sigma * (ax * b[k] * b[p] / nb + nb * tv)) / nv  # fmt: skip
         cv = 0.25 / dt  # dv_r/dx = -1/(2 dt) per node, half the edge force per node
+        g = 0.5 / ln
         for k in range(lo, 3):
             for m in range(lo, 3):
-                d = cv * jac[k, m]  # = -dF_node/dx_any; the residual Jacobian gets +d
-                ab[_DIAG + k - m, a + m] += d
-                ab[_DIAG + k - m - 4, c + m] += d
-                ab[_DIAG + k - m + 4, a + m] += d
-                ab[_DIAG + k - m, c + m] += d
+                geo = 0.0
+                for p in range(3):
+                    geo += dft[k, p] * ((1.0 if p == m else 0.0) - t[p] * t[m])
+                geo *= g
+                d = cv * jac[k, m]  # velocity part of -dF_node/dx, the same for both nodes
+                # the residual Jacobian gets -dF_node/dx: +geo on node j's columns, -geo on j+1's
+                ab[_DIAG + k - m, a + m] += d + geo
+                ab[_DIAG + k - m - 4, c + m] += d - geo
+                ab[_DIAG + k - m + 4, a + m] += d + geo
+                ab[_DIAG + k - m, c + m] += d - geo
