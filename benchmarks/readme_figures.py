@@ -20,9 +20,9 @@ from cnt_env.plotting.topview import lvb_in_um
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
-# the table's serpentine run (reproduce.SERPENTINE_RUN, 150 dropped), the model's mesh
-# and tolerance (presets)
-_MESH = "run=4000-150__coarse=4_fine=20_tol=1e-05"
+# the table's serpentine run (reproduce.SERPENTINE_RUN, 150 dropped), the model's mesh,
+# tolerance and length projection (presets)
+_MESH = "run=4000-150__coarse=4_fine=20_tol=1e-05_proj=0.02"
 PANELS = (
     (f"reproduce/traces/default__serpentine__vbar=0.005__{_MESH}.npy", "v̄ = 0.005, φ = 0"),
     (
