@@ -76,6 +76,16 @@ def _small(preset: str, newton: NewtonOptions) -> DepositionConfig:
     return DepositionConfig(params=params, initial_radius=3.9, tail_length=40.0, **old)
 
 
+def _assert_same_figures(a: np.ndarray, b: np.ndarray, preset: str, keys: tuple) -> None:
+    """The pattern figures ``keys`` of traces a and b agree to 1e-4 relative."""
+    substrate = "flat" if preset == "coil" else "stepped"
+    opts = MeasureOptions(transient_length=30.0)
+    ma, mb = measure(a, opts, substrate), measure(b, opts, substrate)
+    for key in keys:
+        assert np.isfinite(ma[key])
+        assert mb[key] == pytest.approx(ma[key], rel=1e-4), key
+
+
 @pytest.mark.parametrize("preset, length, keys", [
     ("coil", 150.0, ("coil_radius",)),
     ("serpentine", 120.0, ("amplitude", "wavelength")),
@@ -90,12 +100,7 @@ def test_loose_tolerance_keeps_the_figures(preset: str, length: float, keys: tup
     n = min(len(a), len(b))
     assert n >= 0.95 * length
     assert np.max(np.abs(a[:n] - b[:n])) < 1e-3  # L_vb, over the whole trace
-    substrate = "flat" if preset == "coil" else "stepped"
-    opts = MeasureOptions(transient_length=30.0)
-    ma, mb = measure(a, opts, substrate), measure(b, opts, substrate)
-    for key in keys:
-        assert np.isfinite(ma[key])
-        assert mb[key] == pytest.approx(ma[key], rel=1e-4), key
+    _assert_same_figures(a, b, preset, keys)
     # and it is faster: fewer Newton iterations per step
     it = {t: s.rod.newton_iterations / s.rod.steps for t, s in runs.items()}
     assert it[1e-5] < it[1e-8] - 0.1
@@ -292,12 +297,7 @@ def test_length_projection_keeps_the_solution(preset: str, length: float, keys: 
     a, b = runs[1e-8, 0.0].trace(), runs[1e-8, 0.02].trace()
     assert len(a) == len(b) and len(a) >= 0.95 * length
     assert np.max(np.abs(a - b)) < 1e-4  # L_vb, over the whole trace
-    substrate = "flat" if preset == "coil" else "stepped"
-    opts = MeasureOptions(transient_length=30.0)
-    ma, mb = measure(a, opts, substrate), measure(b, opts, substrate)
-    for key in keys:
-        assert np.isfinite(ma[key])
-        assert mb[key] == pytest.approx(ma[key], rel=1e-4), key
+    _assert_same_figures(a, b, preset, keys)
     it = {k: s.rod.newton_iterations / s.rod.steps for k, s in runs.items()}
     assert it[1e-5, 0.02] < it[1e-5, 0.0] - 0.1
     assert it[1e-8, 0.02] < it[1e-8, 0.0]
