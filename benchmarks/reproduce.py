@@ -469,9 +469,9 @@ def _other_seed(rec: dict[str, Any]) -> bool:
     return "|seed=" in rec["key"]
 
 
-def _solver(rec: dict[str, Any]) -> str:
-    """The mesh and Newton settings a record ran with (the last field of its key)."""
-    return rec["key"].rsplit("|", 1)[1]
+def _solver(key: str) -> str:
+    """The mesh and Newton settings a point ran with (the last field of its key)."""
+    return key.rsplit("|", 1)[1]
 
 
 def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -479,9 +479,8 @@ def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
     at the solver settings of today's defaults when any record ran with them: a record
     from before a change of those settings stays in results.jsonl, out of the tables."""
     recs = [r for r in every if not _other_step(r) and not _other_seed(r)]
-    today = {point_key(_point("coil", p), "default", None).rsplit("|", 1)[1]
-             for p in (COIL, SERP)}  # fmt: skip
-    current = [r for r in recs if _solver(r) in today]
+    today = {_solver(point_key(_point("coil", p), "default", None)) for p in (COIL, SERP)}
+    current = [r for r in recs if _solver(r["key"]) in today]
     return current or recs
 
 

@@ -63,13 +63,14 @@ MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
 })  # fmt: skip
 
 #: Newton options of the model (``NewtonOptions`` fields): stop at a residual of 1e-5
-#: e_v instead of the stepper's generic 1e-8 (which is in its caller's force units). The
-#: traces move by < 1e-3 L_vb and the figures by < 2e-3 relative (RESULTS.md, issue 11,
-#: proposal 1; tests/test_stepper_speed_equivalence.py), for 15% fewer iterations. And
-#: project the iterates' edge lengths (``stepper.project_lengths``, each edge shortened
-#: by at most 2% per iteration): the rotating contact edge no longer makes the residual
-#: bounce; same solution to the tolerance, 15-25% fewer iterations (RESULTS.md, issue 11,
-#: "length projection").
+#: e_v instead of the stepper's generic 1e-8 (which is in its caller's force units), for
+#: 15% fewer iterations; on the reduced-scale runs the traces move by < 1e-3 L_vb
+#: (tests/test_stepper_speed_equivalence.py), on the model's serpentine baseline the
+#: traces part after some 100 L_vb and A moves by 1.2% (RESULTS.md, issue 11, length
+#: projection). And project the iterates' edge lengths (``stepper.project_lengths``,
+#: each edge shortened by at most 2% per iteration): the rotating contact edge no longer
+#: makes the residual bounce; same equations and solution, 10-25% fewer iterations
+#: (RESULTS.md, issue 11, "length projection").
 NEWTON: MappingProxyType[str, Any] = MappingProxyType(
     {"residual_tol": 1e-5, "length_projection": 0.02}
 )

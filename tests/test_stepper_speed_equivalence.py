@@ -22,7 +22,7 @@ import pytest
 
 from cnt_env.patterns import MeasureOptions, measure
 from cnt_env.sim.deposition import DepositionConfig, DepositionSim
-from cnt_env.sim.stepper import NewtonOptions
+from cnt_env.sim.stepper import NewtonOptions, project_lengths
 from cnt_env.units import paper_groups
 
 DATA = Path(__file__).parent / "data"
@@ -235,8 +235,6 @@ def test_length_projection_undoes_the_stretch_of_a_linearised_rotation() -> None
     """Edge 1 turned by theta in the linearised way (its upper node moved by theta
     across it) is |e| sqrt(1 + theta^2) long; the projection brings it back to |e|,
     and moves the node above rigidly (edge 2 keeps its vector)."""
-    from cnt_env.sim.stepper import project_lengths
-
     q, t, lengths = _chain([0.0, 0.3, 0.9])
     theta = 0.1
     dq = np.zeros_like(q)
@@ -259,8 +257,6 @@ def test_length_projection_undoes_the_stretch_of_a_linearised_rotation() -> None
 
 
 def test_length_projection_leaves_nodes_with_a_fixed_dof() -> None:
-    from cnt_env.sim.stepper import project_lengths
-
     q, t, lengths = _chain([0.0, 0.3, 0.9])
     dq = np.zeros_like(q)
     dq[8:11] = [0.0, 0.0, 0.2]  # node 2 out of plane: edge 1 and edge 2 stretch
