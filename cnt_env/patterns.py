@@ -183,6 +183,12 @@ class MeasureOptions:
             with an RMS residual up to this fraction of its radius: a coil whose centre
             still drifts (a loose start-up coil) is a coil; its radius comes from the
             strict windows only.
+        coil_min_strict_coverage: the strict windows give the radius only when they
+            cover at least this fraction of the measured arc; below it the coil is a
+            rosette that closes within ``coil_max_rel_residual`` only by chance, and its
+            radius comes from the loose windows (``radius_windows`` "loose"). One stray
+            circular window of a precessing start-up coil once gave R = 10.7 where the
+            loops' radius was ~8.
         rough_turning_angle: median turning angle per vertex (rad) above which the
             trace is too rough to be a rod trace (noise, random walk): "unknown".
         crossing_pair_budget: most candidate segment pairs examined for
@@ -204,6 +210,7 @@ class MeasureOptions:
     coil_min_coverage: float = 0.8
     coil_min_turn_sign_fraction: float = 0.9
     coil_loose_rel_residual: float = 0.25
+    coil_min_strict_coverage: float = 0.5
     rough_turning_angle: float = 0.25 * math.pi
     crossing_pair_budget: int = 2_000_000
 
@@ -222,6 +229,9 @@ class MeasureOptions:
         _check_float("coil_min_coverage", self.coil_min_coverage, upper=1.0)
         _check_float("coil_min_turn_sign_fraction", self.coil_min_turn_sign_fraction, upper=1.0)
         _check_float("coil_loose_rel_residual", self.coil_loose_rel_residual)
+        _check_float(
+            "coil_min_strict_coverage", self.coil_min_strict_coverage, allow_zero=True, upper=1.0
+        )
         _check_float("rough_turning_angle", self.rough_turning_angle, upper=math.pi)
         _check_int("crossing_pair_budget", self.crossing_pair_budget)
 
@@ -498,20 +508,23 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
     result["n_windows"] = n_win
     result["n_rejected"] = int(n_win - radii.size)
     result["radii"] = radii
+    strict = False
     if radii.size:
-        result["median"] = _median(radii)
-        result["spread"] = _spread(radii)
         a_starts = starts[accepted]
         covered = float(np.minimum(np.diff(a_starts), window).sum()) + window
         result["coverage"] = min(1.0, covered / total)
+        strict = result["coverage"] >= options.coil_min_strict_coverage or not loose.any()
+    if strict:
+        result["median"] = _median(radii)
+        result["spread"] = _spread(radii)
         signs = np.sign(turning[accepted])
         result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
     if loose.any():
         l_starts = starts[loose]
         covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
         result["loose_coverage"] = min(1.0, covered / total)
-        if not radii.size:  # a coil that never closes within 5% (a precessing rosette):
-            # its radius and class come from the loose windows, and say so
+        if not strict:  # a coil that (almost) never closes within 5%, a precessing
+            # rosette: its radius and class come from the loose windows, and say so
             loose_radii = radius[loose]
             result["median"] = _median(loose_radii)
             result["spread"] = _spread(loose_radii)
@@ -535,8 +548,9 @@ def coil_radius(trace: ArrayLike, options: MeasureOptions | None = None) -> dict
     Returns ``median`` (NaN if no window is accepted), ``spread`` = (p16, p84) of
     the accepted radii, ``n_windows`` (fitted), ``n_rejected``, ``radii``
     (accepted, in trace order), ``window_length``, ``coverage`` (fraction of the
-    measured arc length inside accepted windows) and ``turn_sign_fraction``. When no
-    window is accepted but some are one turn within ``coil_loose_rel_residual`` (a coil
+    measured arc length inside accepted windows) and ``turn_sign_fraction``. When the
+    accepted windows cover less than ``coil_min_strict_coverage`` (none, or a few that
+    close by chance) but some are one turn within ``coil_loose_rel_residual`` (a coil
     that precesses, a rosette), ``median``, ``spread`` and ``turn_sign_fraction`` come
     from those loose windows and ``radius_windows`` says ``"loose"`` (else
     ``"strict"``); ``loose_coverage`` is their coverage.
@@ -959,8 +973,9 @@ def measure(
     ``[p16, p84]`` lists. Keys: ``pattern``, ``substrate``, ``measured_length``,
     ``transient_length``, ``n_points``, ``coil_radius``, ``coil_radius_spread``,
     ``coil_n_windows``, ``coil_n_rejected``, ``coil_coverage``, ``coil_loose_coverage``,
-    ``coil_radius_windows`` (``"strict"``, or ``"loose"`` when no window closes within
-    ``coil_max_rel_residual`` and the radius is the loose windows'), ``amplitude``,
+    ``coil_radius_windows`` (``"strict"``, or ``"loose"`` when the windows that close
+    within ``coil_max_rel_residual`` cover less than ``coil_min_strict_coverage`` and
+    the radius is the loose windows'), ``amplitude``,
     ``amplitude_spread``, ``amplitude_cv``, ``wavelength``, ``wavelength_spread``,
     ``wavelength_cv``, ``wavelength_progression`` (same-side U-turn spacing along
     the trace's own direction of progression, ``progression_direction``; with the
@@ -1035,7 +1050,8 @@ def classify(
     3. ``"coil"``: windows that are one turn of a circle with a residual up to
        ``coil_loose_rel_residual`` (a loose, drifting coil counts) cover at least
        ``coil_min_coverage`` of the measured arc length; the accepted windows
-       (:func:`coil_radius`; the loose ones when none is accepted: a rosette) have a
+       (:func:`coil_radius`; the loose ones when the accepted ones cover less than
+       ``coil_min_strict_coverage``: a rosette) have a
        relative spread
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
        ``coil_min_turn_sign_fraction`` of them turn the same way.

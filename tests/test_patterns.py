@@ -205,6 +205,29 @@ def test_precessing_coil_is_a_coil_from_its_loose_windows(rho: float, rate: floa
     assert clean["coil_radius_windows"] == "strict"
 
 
+def test_a_few_chance_circles_do_not_set_a_rosettes_radius() -> None:
+    """A rosette of radius 9 that ends in 1.5 turns of a clean circle of radius 11: the
+    only windows closing within 5% are the circle's (8% of the arc). The radius is the
+    loose windows' (~9), not the chance circle's; with coil_min_strict_coverage = 0 (the
+    rule before it) it is 11 (a start-up rosette at seed 5 was once reported R = 10.7)."""
+    phase = np.arange(0.0, 1500.0 / 9.0, 0.5 / 9.0)
+    centre = 3.0 * np.stack([np.cos(-0.3 * phase), np.sin(-0.3 * phase)], axis=1)
+    rosette = centre + 9.0 * np.stack([np.cos(phase), np.sin(phase)], axis=1)
+    t = rosette[-1] - rosette[-2]
+    t /= np.linalg.norm(t)
+    c = rosette[-1] + 11.0 * np.array([-t[1], t[0]])  # the circle continues the tangent
+    a0 = math.atan2(rosette[-1, 1] - c[1], rosette[-1, 0] - c[0])
+    ang = a0 + np.arange(1, int(3.0 * math.pi * 11.0 / 0.5)) * 0.5 / 11.0
+    trace = np.vstack([rosette, c + 11.0 * np.stack([np.cos(ang), np.sin(ang)], axis=1)])
+    result = measure(trace)
+    assert 0.0 < result["coil_coverage"] < 0.5
+    assert result["pattern"] == "coil" and result["coil_radius_windows"] == "loose"
+    assert result["coil_radius"] == pytest.approx(9.0, rel=0.03)
+    old = measure(trace, MeasureOptions(coil_min_strict_coverage=0.0))
+    assert old["coil_radius_windows"] == "strict"
+    assert old["coil_radius"] == pytest.approx(11.0, rel=0.01)
+
+
 def test_coil_radius_of_other_radius_and_finer_spacing() -> None:
     trace = coil_trace(4000.0, radius=20.0, spacing=0.25, seed=3)
     assert coil_radius(trace)["median"] == pytest.approx(20.0, rel=COIL_RADIUS_REL)

@@ -222,3 +222,14 @@ def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: 
     # ... unless the baselines' code changed since (a follower improved): scored again
     (run / "eval_baselines.json").write_text(json.dumps({**cached, "code": "older"}))
     assert eval_set_baselines(run) != {"scripted": 0.5, "random": 0.25}
+
+
+def test_baseline_cache_key_follows_the_simulator(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A cached follower score is stale when the simulator changes, not only when the
+    follower does (a solver change once left a stale score behind)."""
+    from cnt_env.sim import warmstart
+    from training import evaluate
+
+    before = evaluate._baselines_code()
+    monkeypatch.setattr(warmstart, "source_fingerprint", lambda: "another simulator")
+    assert evaluate._baselines_code() != before

@@ -374,16 +374,24 @@ def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]
 
 
 def _baselines_code() -> str:
-    """A fingerprint of the no-model baselines' source (policies/base.py, scripted.py,
-    route_follower.py): a cached baseline score is stale when it changes."""
+    """A fingerprint of everything a no-model baseline's score depends on: its source
+    (policies/base.py, scripted.py, route_follower.py), the task (cnt_env/task) and the
+    simulator (the warm-start cache's source fingerprint). A cached score is stale when
+    any of them changes (a cache keyed on the policies alone kept a follower's score from
+    before a solver change)."""
     import hashlib
 
+    import cnt_env.task
     import policies
+    from cnt_env.sim.warmstart import source_fingerprint
 
+    h = hashlib.sha256(source_fingerprint().encode())
     root = Path(policies.__file__).parent
-    h = hashlib.sha256()
     for name in ("base.py", "scripted.py", "route_follower.py"):
         h.update((root / name).read_bytes())
+    for f in sorted(Path(cnt_env.task.__file__).parent.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 

@@ -232,7 +232,9 @@ def default_cache_dir() -> Path:
 
 
 @functools.cache
-def _source_fingerprint() -> str:
+def source_fingerprint() -> str:
+    """SHA-256 of the simulator's source (``sim/``, ``rod/``, units, presets): anything
+    cached from a simulation is stale when it changes."""
     root = Path(__file__).resolve().parent.parent  # the cnt_env package
     h = hashlib.sha256()
     for name in _SIM_SOURCES:
@@ -252,7 +254,7 @@ def config_key(config: Any, warmup_length: float, seed: int) -> str:
     payload = {
         "format": FORMAT_VERSION,
         "version": __version__,
-        "source": _source_fingerprint(),
+        "source": source_fingerprint(),
         "config": config,
         "warmup_length": float(warmup_length),
         "seed": int(seed),
