@@ -92,25 +92,33 @@ INITIAL_RADIUS: MappingProxyType[str, float] = MappingProxyType({"flat": 6.4, "s
 #: Critical curvature kappa_c L_vb that turns steps on when a flat preset is run stepped.
 DEFAULT_KAPPA_C: float = PAPER_KAPPA_C_BAR
 
-#: Trace length (L_vb) a run deposits when ``--deposit`` is not given. Coil: clean circles
-#: follow a start-up of 200-500 L_vb. Serpentine: about 10 cycles of ~70 L_vb each after
-#: the transient, for the periodicity test.
-RUN_DEPOSIT: MappingProxyType[str, float] = MappingProxyType({"coil": 800.0, "serpentine": 1500.0})
-#: Start-up length dropped before measuring (coils are clean after 200-300 L_vb at the
-#: validated mesh, serpentines after ~150).
-RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 300.0, "serpentine": 150.0})
+#: Trace length (L_vb) a run deposits when ``--deposit`` is not given. Coil: 600 L_vb
+#: (~12 turns) after its transient. Serpentine: the reproduction's 4000 L_vb, ~22 cycles
+#: of ~170 L_vb at the baseline (A = 41): the classes need 10 to call a serpentine
+#: periodic, and at the earlier 1500 the baseline itself came out "too_short" (7 cycles).
+RUN_DEPOSIT: MappingProxyType[str, float] = MappingProxyType({"coil": 1500.0, "serpentine": 4000.0})
+#: Start-up length dropped before measuring. Coil: the paper's transient, "about 2 us",
+#: is 913 L_vb of trace at the model's deposition speed (0.00327 L_vb per tau, tau = 7.16
+#: ps at the coil preset). With 300 dropped of 800, 2 of seeds 0-5 were still precessing
+#: rosettes (no coil radius); with 900 of 1500, seeds 0-6 give R0 7.913-7.915 and seed 7
+#: is still a rosette (RESULTS.md, issue 12, "The coil's start-up"). Serpentines settle
+#: after ~150.
+RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 900.0, "serpentine": 150.0})
 #: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
 DEMO_DEPOSIT: float = 300.0
 
-#: The env's speed settings on the stepped substrate, on top of the model (RESULTS.md,
-#: issue 11): 4x the validated step and 60 L_vb of deposited tail kept in the solve
-#: instead of 195 (serpentine suite, case env_fast). Validated for the issue-4 model
-#: (linear, sliding B: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb tail
-#: alone moves A and lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12, and the 4x
-#: step by up to +8.5% (RESULTS.md, issue 12). On the flat substrate the env runs the
-#: model as it is: 4x the step moves R0 by +6.6%.
+#: The env's speed settings, on top of the model (RESULTS.md, issue 11). Stepped: 4x the
+#: validated step and 60 L_vb of deposited tail kept in the solve instead of 195
+#: (serpentine suite, case env_fast). Validated for the issue-4 model (linear, sliding B:
+#: amplitude -0.2%, wavelength +4.7%); with sliding C the 60 L_vb tail alone moves A and
+#: lambda by -8%/-3% at vbar = 0.019 and -13%/-11% at 0.12, and the 4x step by up to
+#: +8.5% (RESULTS.md, issue 12). Flat: 2x the validated step, 1.58x the L_vb per CPU-s;
+#: over seeds 0-3 (1500 L_vb, 900 dropped) it moves R0 by +0.15% (7.914 -> 7.926), the
+#: loops' radius under flow by +0.2% (vbar 0.037) and +1.0% (0.13) and their drift per
+#: loop by +2.1% and +4.0%; 4x would move them by up to 13%
+#: (benchmarks/results/env_dt_factor_coil.jsonl).
 ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
-    "flat": MappingProxyType({}),
+    "flat": MappingProxyType({"dt_factor": 0.1}),
     "stepped": MappingProxyType({"dt_factor": 0.2, "tail_length": 60.0}),
 })  # fmt: skip
 

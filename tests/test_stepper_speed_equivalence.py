@@ -79,7 +79,9 @@ def _small(preset: str, newton: NewtonOptions) -> DepositionConfig:
 def _assert_same_figures(a: np.ndarray, b: np.ndarray, preset: str, keys: tuple) -> None:
     """The pattern figures ``keys`` of traces a and b agree to 1e-4 relative."""
     substrate = "flat" if preset == "coil" else "stepped"
-    opts = MeasureOptions(transient_length=30.0)
+    # the strict windows' radius however little of these short start-up traces they cover
+    # (28% on the coil): a figure to compare, not a class (coil_min_strict_coverage)
+    opts = MeasureOptions(transient_length=30.0, coil_min_strict_coverage=0.0)
     ma, mb = measure(a, opts, substrate), measure(b, opts, substrate)
     for key in keys:
         assert np.isfinite(ma[key])

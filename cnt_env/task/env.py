@@ -205,7 +205,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `delta_bar`        | 1.0          | discretisation length (L_vb)                    |
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
-    | `dt`               | 0.2 H̄ ...    | physics time step (tau); ENV_SIM_DEFAULTS       |
+    | `dt`               | 0.2/0.1 H̄    | stepped/flat time step (tau); ENV_SIM_DEFAULTS  |
     | `coarse_delta`     | 4.0          | graded mesh (DepositionConfig); presets.MESH    |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
