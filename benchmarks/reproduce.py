@@ -206,14 +206,15 @@ def rows(quick: bool = False, serpentine_run: float = SERPENTINE_RUN
         for k in (0.1, 0.15)
         for v in (0.037, 0.019, 0.07, 0.12)
     ]
-    out["Hbar"] = [_pt("Hbar", SERP, Hbar=h) for h in (100.0, 250.0)]
-    out["Ibar"] = [_pt("Ibar", SERP, Ibar=i) for i in (100.0, 1000.0)]
+    # (the later values of each row were added in round 3's last session, for the curves)
+    out["Hbar"] = [_pt("Hbar", SERP, Hbar=h) for h in (100.0, 250.0, 200.0, 400.0)]
+    out["Ibar"] = [_pt("Ibar", SERP, Ibar=i) for i in (100.0, 1000.0, 30.0, 3000.0)]
     # off the baseline the start-up lasts longer (~1000 L_vb at Hbar = 150): 2500 L_vb,
     # the first 1200 dropped
     long = (2500.0, 1200.0)
-    out["coil_groups"] = [_pt("coil_groups", COIL, long, Hbar=h) for h in (150.0, 400.0)] + [
-        _pt("coil_groups", COIL, long, Ibar=i) for i in (700.0, 7000.0)
-    ]
+    out["coil_groups"] = [
+        _pt("coil_groups", COIL, long, Hbar=h) for h in (150.0, 400.0, 100.0, 200.0, 300.0)
+    ] + [_pt("coil_groups", COIL, long, Ibar=i) for i in (700.0, 7000.0, 300.0, 1500.0, 4000.0)]
     return out
 
 
@@ -724,7 +725,8 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
 
     every = [r for r in records if r["candidate"] == candidate]
     recs = [r for r in headline(every) if r["preset"] == SERP]
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+    coils = [r for r in headline(every) if r["preset"] == COIL]
+    fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
     by_k: dict[float, list[dict[str, Any]]] = {}
     for r in recs:
@@ -768,6 +770,26 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
         axes[1, 2].scatter([], [], c=c, label=name)
     axes[1, 2].set(xlabel="kappa_c", ylabel="vbar", title="phases")
     axes[1, 2].legend(fontsize=7)
+    # the H and I rows: coil radius (flat) and serpentine A, lambda (stepped, vbar 0.037)
+    for ax, key, fixed, base in ((axes[2, 0], "Hbar", "Ibar", 2200.0),
+                                 (axes[2, 1], "Ibar", "Hbar", 253.0)):  # fmt: skip
+        rs = sorted([r for r in coils if r[fixed] == base], key=lambda r: r[key])
+        ax.plot([r[key] for r in rs], [r["coil_radius"] or math.nan for r in rs], "o-",
+                label="model (no point: no coil)")  # fmt: skip
+        ax.axhline(7.64, color="k", ls="--", lw=0.8, label="paper R0 at the baseline")
+        ax.set(xlabel=key, ylabel="coil R0", title=f"coils ({fixed} = {base:g})")
+        ax.legend(fontsize=7)
+    ax = axes[2, 2]
+    for key, fixed, base, mark in (("Hbar", "Ibar", 300.0, "o-"), ("Ibar", "Hbar", 155.0, "s-")):
+        rs = [r for r in recs if r["vbar"] == 0.037 and r["phi"] == 0
+              and r["kappa_c_bar"] == 0.2 and r[fixed] == base]  # fmt: skip
+        rs.sort(key=lambda r: r[key])
+        ax.plot([r[key] for r in rs], [r["amplitude"] or math.nan for r in rs], mark,
+                label=f"A vs {key}")  # fmt: skip
+        ax.plot([r[key] for r in rs], [r["wavelength_x"] or math.nan for r in rs], mark,
+                mfc="none", label=f"lambda_x vs {key}")  # fmt: skip
+    ax.set(xscale="log", xlabel="Hbar or Ibar", title="serpentines, vbar = 0.037")
+    ax.legend(fontsize=7)
     fig.suptitle(f"candidate {candidate}")
     fig.tight_layout()
     fig.savefig(out / f"trends_{candidate}.png", dpi=110)

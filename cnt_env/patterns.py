@@ -177,7 +177,12 @@ class MeasureOptions:
         coil_min_coverage: a coil needs its accepted windows to cover at least
             this fraction of the measured arc length.
         coil_min_turn_sign_fraction: a coil needs at least this fraction of its
-            accepted windows to turn the same way (turning "about monotone").
+            accepted windows to turn the same way (turning "about monotone"), or ...
+        coil_min_run_turns: ... every run of its accepted windows that turn the same
+            way (in trace order) to span at least this many turns: a coil that
+            reverses its handedness between two long coiled stretches (the H-bar = 200
+            coil reverses once: 86% of its windows one way) is a coil, alternating
+            loops (runs of one or two turns) are not.
         coil_loose_rel_residual: for the class only, a window counts towards the
             coil coverage when it is one turn of a circle (turning and length tests)
             with an RMS residual up to this fraction of its radius: a coil whose centre
@@ -209,6 +214,7 @@ class MeasureOptions:
     coil_max_rel_spread: float = 0.10
     coil_min_coverage: float = 0.8
     coil_min_turn_sign_fraction: float = 0.9
+    coil_min_run_turns: float = 3.0
     coil_loose_rel_residual: float = 0.25
     coil_min_strict_coverage: float = 0.5
     rough_turning_angle: float = 0.25 * math.pi
@@ -228,6 +234,7 @@ class MeasureOptions:
         _check_float("coil_max_rel_spread", self.coil_max_rel_spread)
         _check_float("coil_min_coverage", self.coil_min_coverage, upper=1.0)
         _check_float("coil_min_turn_sign_fraction", self.coil_min_turn_sign_fraction, upper=1.0)
+        _check_float("coil_min_run_turns", self.coil_min_run_turns)
         _check_float("coil_loose_rel_residual", self.coil_loose_rel_residual)
         _check_float(
             "coil_min_strict_coverage", self.coil_min_strict_coverage, allow_zero=True, upper=1.0
@@ -466,6 +473,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         "coverage": 0.0,
         "loose_coverage": 0.0,
         "turn_sign_fraction": math.nan,
+        "min_sign_run_turns": 0.0,
         "radius_windows": "strict",
     }
     if not math.isfinite(window) or window > total:
@@ -519,6 +527,7 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
         result["spread"] = _spread(radii)
         signs = np.sign(turning[accepted])
         result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+        result["min_sign_run_turns"] = _min_sign_run(signs, starts[accepted], window, options)
     if loose.any():
         l_starts = starts[loose]
         covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
@@ -530,8 +539,21 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
             result["spread"] = _spread(loose_radii)
             signs = np.sign(turning[loose])
             result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+            result["min_sign_run_turns"] = _min_sign_run(signs, l_starts, window, options)
             result["radius_windows"] = "loose"
     return result
+
+
+def _min_sign_run(
+    signs: FloatArray, starts: FloatArray, window: float, options: MeasureOptions
+) -> float:
+    """The shortest span, in turns, of a run of windows (trace order) turning the same
+    way: from the first window's start to the last one's end."""
+    cuts = np.flatnonzero(np.diff(signs) != 0) + 1
+    first = np.concatenate(([0], cuts))
+    last = np.concatenate((cuts - 1, [signs.size - 1]))
+    spans = (starts[last] - starts[first] + window) / window * options.coil_window_turns
+    return float(spans.min())
 
 
 def coil_radius(trace: ArrayLike, options: MeasureOptions | None = None) -> dict[str, Any]:
@@ -935,7 +957,10 @@ def _pattern(
         if (
             (p84 - p16) / (2.0 * median) < options.coil_max_rel_spread
             and coil["loose_coverage"] >= options.coil_min_coverage
-            and coil["turn_sign_fraction"] >= options.coil_min_turn_sign_fraction
+            and (
+                coil["turn_sign_fraction"] >= options.coil_min_turn_sign_fraction
+                or coil["min_sign_run_turns"] >= options.coil_min_run_turns
+            )
         ):
             return "coil"
     if substrate == "stepped" and serp["n_uturns"] >= 2:
@@ -1054,7 +1079,9 @@ def classify(
        ``coil_min_strict_coverage``: a rosette) have a
        relative spread
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
-       ``coil_min_turn_sign_fraction`` of them turn the same way.
+       ``coil_min_turn_sign_fraction`` of them turn the same way or every run of
+       them turning the same way spans ``coil_min_run_turns`` turns (a coil that
+       reverses its handedness between long coiled stretches).
     4. On the ``"stepped"`` substrate, with at least two U-turns:
        ``"serpentine-coil"`` if it has at least ``serpentine_coil_min_loops`` loop
        events and at least ``serpentine_coil_loop_density`` of them per cycle (a loop

@@ -611,3 +611,35 @@ def test_real_coil_with_a_drifting_start_is_a_coil() -> None:
     # a serpentine's windows are not one turn of a circle, however loose
     serp = measure(serpentine_trace(), substrate="stepped")
     assert serp["coil_loose_coverage"] < 0.2
+
+
+def _loops(turns: list[float], radius: float = 8.0, spacing: float = 0.5) -> np.ndarray:
+    """A tangent-continuous chain of circular arcs of ``radius``: each entry of
+    ``turns`` is one arc, turns > 0 counter-clockwise, < 0 clockwise; each arc starts
+    where the last ended, with its tangent."""
+    p, heading, out = np.zeros(2), 0.0, [np.zeros(2)]
+    for turn in turns:
+        sign = 1.0 if turn > 0 else -1.0
+        left = np.array([-math.sin(heading), math.cos(heading)])
+        centre = p + sign * radius * left
+        a0 = math.atan2(p[1] - centre[1], p[0] - centre[0])
+        n = round(abs(turn) * 2.0 * math.pi * radius / spacing)
+        a = a0 + sign * np.arange(1, n + 1) * spacing / radius
+        arc = centre + radius * np.stack([np.cos(a), np.sin(a)], axis=1)
+        out.append(arc)
+        p, heading = arc[-1], heading + sign * n * spacing / radius
+    return np.vstack(out)
+
+
+def test_a_coil_that_reverses_its_handedness_is_a_coil() -> None:
+    """Ten turns one way, then eight the other (the H-bar = 200 coil of the reproduction
+    reverses once: 86% of its windows turn one way, below coil_min_turn_sign_fraction):
+    every same-sign run spans >= coil_min_run_turns, so a coil, radius 8. Alternating
+    one-turn loops (a figure-eight chain) are not a coil."""
+    reversing = measure(_loops([10.0, -8.0]), MeasureOptions(transient_length=0.0))
+    assert reversing["pattern"] == "coil"
+    assert reversing["coil_radius"] == pytest.approx(8.0, rel=0.01)
+    alternating = measure(_loops([1.0, -1.0] * 9), MeasureOptions(transient_length=0.0))
+    assert alternating["pattern"] != "coil"
+    strict = MeasureOptions(transient_length=0.0, coil_min_run_turns=1e9)  # the rule before
+    assert measure(_loops([10.0, -8.0]), strict)["pattern"] != "coil"
