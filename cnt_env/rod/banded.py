@@ -206,16 +206,30 @@ def band_lu_factor(ab, n, ipiv):
         # scale multipliers, then rank-1 update of A[j+1 .. j+km, j+1 .. ju]
         usum = 0.0
         lj = ab[KV + 1 :, j]  # multipliers L[j+1 .., j]
-        nonzero = False
-        for r in range(km):
-            if lj[r] != 0.0:  # NaN counts as non-zero
-                nonzero = True
-                break
-        if not nonzero:
+        m = km  # 1 + the last non-zero multiplier (NaN counts as non-zero)
+        while m > 0 and lj[m - 1] == 0.0:
+            m -= 1
+        if m == 0:
             # a column with nothing below the pivot (a fixed DOF, band_fix_dof): the
             # multipliers are zero and the update would subtract exact zeros; skip it
             for c in range(j + 1, ju + 1):
                 usum += abs(ab[KV + j - c, c])
+        elif m < km:
+            # zeros below row j + m (a sparse column, e.g. the z-only DOFs of a deposited
+            # tail in the free-DOF system, coupled to two neighbours): update rows j+1 ..
+            # j+m only, and skip the columns whose U entry is an exact zero; the skipped
+            # operations subtract exact zeros, so every non-zero entry keeps its bits
+            for r in range(m):
+                lj[r] *= pinv
+            for c in range(j + 1, ju + 1):
+                ru = KV + j - c
+                u = ab[ru, c]
+                usum += abs(u)
+                if u == 0.0:
+                    continue
+                colc = ab[ru + 1 :, c]
+                for r in range(m):
+                    colc[r] -= lj[r] * u
         elif km == KL:
             # interior columns: constant trip count, fully unrolled by LLVM
             for r in range(KL):
