@@ -156,7 +156,10 @@ def band_lu_factor(ab, n, ipiv):
     among rows j .. j+KL, swap it into row j over columns j .. ju (ju = the
     rightmost column reached by any swapped row so far, which is where the
     up-to-KL extra super-diagonals of fill-in come from), scale the
-    multipliers and apply the rank-1 update to the trailing band.
+    multipliers and apply the rank-1 update to the trailing band. The update
+    stops at the last non-zero multiplier and skips exact-zero entries of U's
+    row: it subtracts no exact zeros, which leaves every non-zero entry's bits
+    as the full update would.
 
     Returns ``info``: 0 on success, else the 1-based column j+1 at which the
     factorisation stopped because the pivot was exactly zero or the pivot
@@ -214,23 +217,7 @@ def band_lu_factor(ab, n, ipiv):
             # multipliers are zero and the update would subtract exact zeros; skip it
             for c in range(j + 1, ju + 1):
                 usum += abs(ab[KV + j - c, c])
-        elif m < km:
-            # zeros below row j + m (a sparse column, e.g. the z-only DOFs of a deposited
-            # tail in the free-DOF system, coupled to two neighbours): update rows j+1 ..
-            # j+m only, and skip the columns whose U entry is an exact zero; the skipped
-            # operations subtract exact zeros, so every non-zero entry keeps its bits
-            for r in range(m):
-                lj[r] *= pinv
-            for c in range(j + 1, ju + 1):
-                ru = KV + j - c
-                u = ab[ru, c]
-                usum += abs(u)
-                if u == 0.0:
-                    continue
-                colc = ab[ru + 1 :, c]
-                for r in range(m):
-                    colc[r] -= lj[r] * u
-        elif km == KL:
+        elif m == KL:
             # interior columns: constant trip count, fully unrolled by LLVM
             for r in range(KL):
                 lj[r] *= pinv
@@ -242,14 +229,21 @@ def band_lu_factor(ab, n, ipiv):
                 for r in range(KL):
                     colc[r] -= lj[r] * u
         else:
-            for r in range(km):
+            # the last columns (km < KL), or a sparse one (zeros below row j + m, e.g. the
+            # z-only DOFs of a deposited tail in the free-DOF system, coupled to two
+            # neighbours): update rows j+1 .. j+m only, and skip the columns whose U entry
+            # is an exact zero; the skipped operations subtract exact zeros, so every
+            # non-zero entry keeps its bits
+            for r in range(m):
                 lj[r] *= pinv
             for c in range(j + 1, ju + 1):
                 ru = KV + j - c
                 u = ab[ru, c]
                 usum += abs(u)
+                if u == 0.0:
+                    continue
                 colc = ab[ru + 1 :, c]
-                for r in range(km):
+                for r in range(m):
                     colc[r] -= lj[r] * u
         if not (usum - usum == 0.0):
             return j + 1
