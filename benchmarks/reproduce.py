@@ -481,14 +481,18 @@ def _solver(key: str) -> str:
     return key.rsplit("|", 1)[1]
 
 
+def _at_todays_solver(recs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records run at today's default mesh, tolerance and projection, if any."""
+    today = {_solver(point_key(_point("coil", p), "default", None)) for p in (COIL, SERP)}
+    return [r for r in recs if _solver(r["key"]) in today] or recs
+
+
 def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The default step and seed 0 (the other steps and seeds have their own sections),
     at the solver settings of today's defaults when any record ran with them, and of a
     point run more than once (e.g. with a longer run) its latest record: a record from
     before a change of those settings stays in results.jsonl, out of the tables."""
-    recs = [r for r in every if not _other_step(r) and not _other_seed(r)]
-    today = {_solver(point_key(_point("coil", p), "default", None)) for p in (COIL, SERP)}
-    current = [r for r in recs if _solver(r["key"]) in today] or recs
+    current = _at_todays_solver([r for r in every if not _other_step(r) and not _other_seed(r)])
     latest = {(r["row"], r["preset"], tuple(sorted(r["groups"].items()))): r for r in current}
     return [
         r
@@ -531,7 +535,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
             f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
             f"{r['wall_s']} | {r['error'] or ''} |"
         )
-    other = [r for r in every if _other_step(r) and not _other_seed(r)]
+    other = _at_todays_solver([r for r in every if _other_step(r) and not _other_seed(r)])
     if other:
         lines += ["", "## Other time steps (same points, dt_factor changed)", "",
                   "| row | point | dt_factor | class | A | lambda_x | R0 | A change | "
