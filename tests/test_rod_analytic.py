@@ -172,3 +172,25 @@ def test_split_edge_preserves_shape_energy_and_mass() -> None:
     np.testing.assert_allclose(rod._twist[4:7], 0.0, atol=1e-12)
     rod.step(1e-3)
     assert np.all(np.isfinite(rod.q[: rod.n_dof]))
+
+
+def test_predictor_retry_solves_from_the_step_start_before_halving() -> None:
+    """NewtonOptions.predictor_retry: a nearly massless rod at rest in its straight
+    equilibrium, given a wild stale velocity, so the predictor q + dt u starts far from
+    the solution (which is q, the inertia being ~0). Without the retry Newton fails
+    within max_iter from the predictor and the step is halved 10 times; with it the
+    same equations are solved once more from q and converge: no halving. Off by default."""
+    assert NewtonOptions().predictor_retry is False
+    result = {}
+    for retry in (False, True):
+        rod = Rod(straight_nodes(10), RodMaterial(k_s=1e3, k_b=1.0, k_t=1.0, rho=1e-9, r0=0.1),
+                  options=NewtonOptions(max_iter=4, predictor_retry=retry))  # fmt: skip
+        rod.fix_node(0)
+        rod.fix_node(1)
+        rod.fix_theta(0)
+        rod.u[1 : rod.n_dof : 4] = 20.0 * np.sin(np.arange(11))
+        rod.step(0.05)
+        result[retry] = rod
+        assert np.max(np.abs(rod.nodes[:, 1])) < 1e-6  # back at the equilibrium
+    assert result[False].halvings > 0
+    assert result[True].halvings == 0 and result[True].steps == 1

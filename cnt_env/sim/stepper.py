@@ -170,6 +170,13 @@ class NewtonOptions:
     # converged solution to the tolerance, fewer iterations where edges rotate (the
     # model's contact edge): benchmarks/RESULTS.md, "Issue 11", length projection.
     length_projection: float = 0.0
+    # A step whose Newton solve fails from the predictor q_n + dt u_n is solved once more
+    # from q_n before it is halved (same equations: only the start differs). Off by
+    # default: it changes the trajectory wherever a step used to be halved. On the
+    # serpentine at half the model's step the predictor's start diverges in the step
+    # after a deposit (residuals 1e4-1e9) while q_n converges in 4-5 iterations
+    # (benchmarks/RESULTS.md, issue 12, "Δt on the shipped solver").
+    predictor_retry: bool = False
 
     def __post_init__(self) -> None:
         p = self.length_projection
@@ -615,9 +622,11 @@ def implicit_step(
     check: bool,
     transport: bool,
     projection: float,
+    retry: bool = False,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
-    step start, predict q_n + dt u_n on free DOFs, solve; commit (u, start-of-step
+    step start, predict q_n + dt u_n on free DOFs, solve (with ``retry``, once more from
+    q_n when that fails; out_stats then sum both solves' counts); commit (u, start-of-step
     frames) on success or restore q and u on failure."""
     n_dof = 4 * n_nodes - 1
     for k in range(n_dof):
@@ -638,6 +647,23 @@ def implicit_step(
         d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
         free, rhs_r, check, transport, projection,
     )  # fmt: skip
+    if status != CONVERGED and retry:
+        first_its = out_stats[0]
+        first_lus = out_stats[2]
+        first_res = out_stats[3]
+        for k in range(n_dof):
+            q[k] = q_old[k]
+        status = newton_solve(
+            q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s,
+            k_b, k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu,
+            sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
+            update_tol * min_rest, max_iter, tangents, lengths,
+            d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
+            free, rhs_r, check, transport, projection,
+        )  # fmt: skip
+        out_stats[0] += first_its
+        out_stats[2] += first_lus
+        out_stats[3] += first_res
     if status != CONVERGED:
         for k in range(n_dof):
             q[k] = q_old[k]
@@ -975,7 +1001,7 @@ class Rod:
             self._kb, self._kappa, self._twist, self._ref_twist,
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
             self._ab_r, self._free, self._rhs_r, o.residual_check, o.exact_jacobian,
-            o.length_projection,
+            o.length_projection, o.predictor_retry,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
