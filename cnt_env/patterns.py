@@ -516,32 +516,32 @@ def _coil(m: _Measured, options: MeasureOptions) -> dict[str, Any]:
     result["n_windows"] = n_win
     result["n_rejected"] = int(n_win - radii.size)
     result["radii"] = radii
-    strict = False
     if radii.size:
-        a_starts = starts[accepted]
-        covered = float(np.minimum(np.diff(a_starts), window).sum()) + window
-        result["coverage"] = min(1.0, covered / total)
-        strict = result["coverage"] >= options.coil_min_strict_coverage or not loose.any()
-    if strict:
-        result["median"] = _median(radii)
-        result["spread"] = _spread(radii)
-        signs = np.sign(turning[accepted])
-        result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
-        result["min_sign_run_turns"] = _min_sign_run(signs, starts[accepted], window, options)
+        result["coverage"] = _coverage(starts[accepted], window, total)
     if loose.any():
-        l_starts = starts[loose]
-        covered = float(np.minimum(np.diff(l_starts), window).sum()) + window
-        result["loose_coverage"] = min(1.0, covered / total)
-        if not strict:  # a coil that (almost) never closes within 5%, a precessing
-            # rosette: its radius and class come from the loose windows, and say so
-            loose_radii = radius[loose]
-            result["median"] = _median(loose_radii)
-            result["spread"] = _spread(loose_radii)
-            signs = np.sign(turning[loose])
-            result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
-            result["min_sign_run_turns"] = _min_sign_run(signs, l_starts, window, options)
+        result["loose_coverage"] = _coverage(starts[loose], window, total)
+    # the strict windows set the radius when they cover enough of the arc; else the loose
+    # ones (a coil that almost never closes within 5%, a precessing rosette), which say so
+    strict = radii.size > 0 and (
+        result["coverage"] >= options.coil_min_strict_coverage or not loose.any()
+    )
+    if strict or loose.any():
+        use = accepted if strict else loose
+        result["median"] = _median(radius[use])
+        result["spread"] = _spread(radius[use])
+        signs = np.sign(turning[use])
+        result["turn_sign_fraction"] = float(max((signs > 0).mean(), (signs < 0).mean()))
+        result["min_sign_run_turns"] = _min_sign_run(signs, starts[use], window, options)
+        if not strict:
             result["radius_windows"] = "loose"
     return result
+
+
+def _coverage(starts: FloatArray, window: float, total: float) -> float:
+    """Fraction of the measured arc ``total`` inside windows of length ``window`` that
+    start at ``starts`` (ascending)."""
+    covered = float(np.minimum(np.diff(starts), window).sum()) + window
+    return min(1.0, covered / total)
 
 
 def _min_sign_run(
