@@ -639,20 +639,16 @@ def implicit_step(
     for j in range(1, n_nodes - 1):
         if rest_lengths[j] < min_rest:
             min_rest = rest_lengths[j]
-    status = newton_solve(
-        q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s, k_b,
-        k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu, sigma,
-        c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
-        update_tol * min_rest, max_iter, tangents, lengths,
-        d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
-        free, rhs_r, check, transport, projection,
-    )  # fmt: skip
-    if status != CONVERGED and retry:
-        first_its = out_stats[0]
-        first_lus = out_stats[2]
-        first_res = out_stats[3]
-        for k in range(n_dof):
-            q[k] = q_old[k]
+    status = MAX_ITERATIONS
+    its = 0.0
+    lus = 0.0
+    residual_only = 0.0
+    for attempt in range(2 if retry else 1):
+        if attempt == 1:
+            if status == CONVERGED:
+                break
+            for k in range(n_dof):  # the retry: the same equations from q_n
+                q[k] = q_old[k]
         status = newton_solve(
             q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s,
             k_b, k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu,
@@ -661,9 +657,12 @@ def implicit_step(
             d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
             free, rhs_r, check, transport, projection,
         )  # fmt: skip
-        out_stats[0] += first_its
-        out_stats[2] += first_lus
-        out_stats[3] += first_res
+        its += out_stats[0]
+        lus += out_stats[2]
+        residual_only += out_stats[3]
+    out_stats[0] = its
+    out_stats[2] = lus
+    out_stats[3] = residual_only
     if status != CONVERGED:
         for k in range(n_dof):
             q[k] = q_old[k]
