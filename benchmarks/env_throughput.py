@@ -50,7 +50,7 @@ import numpy as np  # noqa: E402
 from cnt_env.patterns import MeasureOptions  # noqa: E402
 from cnt_env.patterns import measure as measure_pattern  # noqa: E402
 from cnt_env.sim import warmstart  # noqa: E402
-from cnt_env.sim.deposition import DepositionSim  # noqa: E402
+from cnt_env.sim.deposition import DepositionConfig, DepositionSim  # noqa: E402
 from cnt_env.sim.stepper import NewtonOptions  # noqa: E402
 from cnt_env.task.env import CNTDepositEnv  # noqa: E402
 
@@ -217,7 +217,7 @@ def main(argv: list[str] | None = None) -> None:
         if args.previous:
             before = {"coarse_delta": None, "newton": NewtonOptions()}
             if preset == "coil":  # the flat env ran the validated step until round 3's end
-                before["dt_factor"] = 0.05
+                before["dt_factor"] = DepositionConfig.dt_factor
             prev = measure(dict(base, preset=preset, sim_options=before), args.steps)
             result[preset]["previous"] = prev
             result[preset]["ratio_to_previous"] = round(

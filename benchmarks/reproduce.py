@@ -493,12 +493,12 @@ def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
     point run more than once (e.g. with a longer run) its latest record: a record from
     before a change of those settings stays in results.jsonl, out of the tables."""
     current = _at_todays_solver([r for r in every if not _other_step(r) and not _other_seed(r)])
-    latest = {(r["row"], r["preset"], tuple(sorted(r["groups"].items()))): r for r in current}
-    return [
-        r
-        for r in current
-        if latest[(r["row"], r["preset"], tuple(sorted(r["groups"].items())))] is r
-    ]
+
+    def point(r: dict[str, Any]) -> tuple:
+        return r["row"], r["preset"], tuple(sorted(r["groups"].items()))
+
+    latest = {point(r): r for r in current}
+    return [r for r in current if latest[point(r)] is r]
 
 
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
@@ -727,9 +727,9 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    every = [r for r in records if r["candidate"] == candidate]
-    recs = [r for r in headline(every) if r["preset"] == SERP]
-    coils = [r for r in headline(every) if r["preset"] == COIL]
+    shown = headline([r for r in records if r["candidate"] == candidate])
+    recs = [r for r in shown if r["preset"] == SERP]
+    coils = [r for r in shown if r["preset"] == COIL]
     fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
     by_k: dict[float, list[dict[str, Any]]] = {}
