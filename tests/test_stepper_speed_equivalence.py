@@ -1,10 +1,16 @@
 """Speed work on the stepper (issue 11) keeps the physics.
 
-* The stepper is bit-identical to the reference results in
+* The stepper reproduces the reference results in
   ``tests/data/stepper_regression.npz`` (generated at commit 9eb2b55, before the speed
   work, by ``tests/data/make_stepper_regression.py``): the compiled step, the
   residual-only convergence check and the banded LU's skipping of exact zeros change no
-  bit.
+  bit on the machine that made the reference. On another CPU numpy's SIMD kernels
+  (np.dot, norms) round differently in the last bits, so the comparison is
+  ``_same_run``: every count (Newton iterations per step, halvings, steps, deposits)
+  exactly and the positions and velocities to 1e-10 (across two CPUs they differ by
+  1.8e-12; the least change measured, the exact Jacobian instead of the DER Hessian at
+  the same tolerance, moves them by 1.2e-9, a tolerance of 1e-7 instead of 1e-8 by
+  1.6e-8 and the iteration counts).
 * The looser Newton tolerance proposed for the deposition model (residual_tol = 1e-5
   e_v instead of the default 1e-8) changes the result only far inside the 0.5% bar of
   the validation figures (benchmarks/RESULTS.md, "Issue 11: speed"), checked here at a
@@ -42,20 +48,26 @@ def reference() -> dict:
         return dict(z)
 
 
-def test_rod_api_is_bit_identical_to_reference(reference) -> None:
-    out = gen.rod_case(REFERENCE_TOL)
+def _same_run(out: dict, reference: dict) -> None:
+    """The reference run again: integer records (counts) exactly, floats to 1e-10."""
     for key, value in out.items():
-        np.testing.assert_array_equal(value, reference[key], err_msg=key)
+        ref = reference[key]
+        if np.issubdtype(np.asarray(ref).dtype, np.integer):
+            np.testing.assert_array_equal(value, ref, err_msg=key)
+        else:
+            np.testing.assert_allclose(value, ref, rtol=0.0, atol=1e-10, err_msg=key)
+
+
+def test_rod_api_reproduces_the_reference(reference) -> None:
+    _same_run(gen.rod_case(REFERENCE_TOL), reference)
 
 
 @pytest.mark.parametrize("name, preset, length", [("dep_coil", "coil", 25.0),
                                                   ("dep_serp", "serpentine", 40.0)])  # fmt: skip
-def test_deposition_is_bit_identical_to_reference(reference, name, preset, length) -> None:
+def test_deposition_reproduces_the_reference(reference, name, preset, length) -> None:
     # these two depend on the deposition model's configuration too: regenerate the data
     # (tests/data/make_stepper_regression.py) when deposition.py or substrate.py change
-    out = gen.dep_case(name, preset, length, REFERENCE_TOL)
-    for key, value in out.items():
-        np.testing.assert_array_equal(value, reference[key], err_msg=key)
+    _same_run(gen.dep_case(name, preset, length, REFERENCE_TOL), reference)
 
 
 def test_residual_check_is_bit_identical() -> None:
