@@ -287,6 +287,8 @@ def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
     sd = f"|seed={seed}" if seed else ""
     proj = cfg.newton.length_projection  # named when on (records before it ran without)
     pj = f",proj={proj:g}" if proj else ""
+    rot = cfg.newton.max_edge_rotation  # named when on (records before it ran without)
+    pj += f",rot={math.degrees(rot):g}" if rot else ""
     return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}{pj}"
 
 
@@ -354,6 +356,7 @@ def run_point(
         "fine_length": cfg.fine_length,
         "residual_tol": cfg.newton.residual_tol,
         "length_projection": cfg.newton.length_projection,
+        "max_edge_rotation": cfg.newton.max_edge_rotation,
         "contact_mode": cfg.contact.mode,
         "deposit": length,
         "transient": transient,

@@ -9,6 +9,7 @@ tables and override them; none of them keeps a copy.
 
 from __future__ import annotations
 
+import math
 from types import MappingProxyType
 from typing import Any
 
@@ -17,6 +18,7 @@ from cnt_env.units import PAPER_KAPPA_C_BAR, PRESETS
 __all__ = [
     "DEFAULT_KAPPA_C",
     "DEMO_DEPOSIT",
+    "ENV_NEWTON",
     "ENV_SIM_DEFAULTS",
     "INITIAL_RADIUS",
     "MESH",
@@ -70,9 +72,13 @@ MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
 #: projection). And project the iterates' edge lengths (``stepper.project_lengths``,
 #: each edge shortened by at most 2% per iteration): the rotating contact edge no longer
 #: makes the residual bounce; same equations and solution, 10-25% fewer iterations
-#: (RESULTS.md, issue 11, "length projection").
+#: (RESULTS.md, issue 11, "length projection"). And reject a step that turns an edge by
+#: more than 30 deg (``NewtonOptions.max_edge_rotation``; halved instead): at the model's
+#: step no serpentine step turns an edge past 17.2 deg, but at half the step Newton
+#: sometimes converged to a distant root with a hairpin beside the contact, which made
+#: periodic serpentines irregular (RESULTS.md, issue 12, "Δt on the shipped solver").
 NEWTON: MappingProxyType[str, Any] = MappingProxyType(
-    {"residual_tol": 1e-5, "length_projection": 0.02}
+    {"residual_tol": 1e-5, "length_projection": 0.02, "max_edge_rotation": math.radians(30.0)}
 )
 
 
@@ -121,6 +127,11 @@ ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingPro
     "flat": MappingProxyType({"dt_factor": 0.1}),
     "stepped": MappingProxyType({"dt_factor": 0.2, "tail_length": 60.0}),
 })  # fmt: skip
+#: NewtonOptions fields the env sets over ``NEWTON``: the edge-rotation check is off in
+#: the env for now. Its step (dt_factor 0.2) turns an edge past 30 deg about once per
+#: 600 L_vb of serpentine (41.6 deg at most), and the committed evaluation and policies
+#: of the routing task were produced without the check (RESULTS.md, issue 12).
+ENV_NEWTON: MappingProxyType[str, Any] = MappingProxyType({"max_edge_rotation": 0.0})
 
 assert set(MESH) == set(PRESETS) == set(RUN_DEPOSIT) == set(RUN_TRANSIENT)
 

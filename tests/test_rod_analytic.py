@@ -194,3 +194,42 @@ def test_predictor_retry_solves_from_the_step_start_before_halving() -> None:
         assert np.max(np.abs(rod.nodes[:, 1])) < 1e-6  # back at the equilibrium
     assert result[False].halvings > 0
     assert result[True].halvings == 0 and result[True].steps == 1
+
+
+def _spinning_rod(max_rotation_deg: float) -> Rod:
+    """A free straight rod (4 edges along x, centre at the origin) spinning about z at
+    omega = 1: a step dt turns every edge by about dt rad (stiff stretching keeps it
+    rigid)."""
+    nodes = straight_nodes(4, length=1.0) - [0.5, 0.0, 0.0]
+    rod = Rod(nodes, RodMaterial(k_s=1e4, k_b=1.0, k_t=1.0, rho=1.0, r0=0.05),
+              options=NewtonOptions(max_edge_rotation=np.radians(max_rotation_deg)))  # fmt: skip
+    rod.u[0 : rod.n_dof : 4] = -nodes[:, 1]  # u = omega x r, omega = (0, 0, 1)
+    rod.u[1 : rod.n_dof : 4] = nodes[:, 0]
+    return rod
+
+
+def test_max_edge_rotation_halves_a_step_that_turns_an_edge_too_far() -> None:
+    """NewtonOptions.max_edge_rotation: a step that turns an edge by ~40 deg converges
+    and is accepted with the check off; with a 20 deg limit it is rejected and halved
+    until every accepted sub-step turns the edges by less than 20 deg. A step below the
+    limit is bit-identical with and without the check. Off (0) by default."""
+    assert NewtonOptions().max_edge_rotation == 0.0
+    dt = np.radians(40.0)
+
+    def angle(rod: Rod) -> float:
+        e = rod.nodes[-1] - rod.nodes[0]
+        return float(np.degrees(np.arctan2(e[1], e[0])))
+
+    off, on = _spinning_rod(0.0), _spinning_rod(20.0)
+    off.step(dt)
+    assert off.halvings == 0 and 30.0 < angle(off) < 45.0
+    on.step(dt)
+    assert on.halvings >= 1 and on.steps >= 2  # accepted as sub-steps of <= 20 deg each
+    assert 30.0 < angle(on) < 45.0  # the same motion, resolved
+    small_off, small_on = _spinning_rod(0.0), _spinning_rod(20.0)
+    small_off.step(np.radians(5.0))
+    small_on.step(np.radians(5.0))
+    assert small_on.halvings == 0
+    assert np.array_equal(small_off.q, small_on.q) and np.array_equal(small_off.u, small_on.u)
+    with pytest.raises(ValueError, match="max_edge_rotation"):
+        NewtonOptions(max_edge_rotation=-0.1)

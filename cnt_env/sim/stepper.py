@@ -74,11 +74,13 @@ CONVERGED = 0
 MAX_ITERATIONS = 1
 SINGULAR = 2
 NON_FINITE = 3
+ROTATED = 4
 STATUS_TEXT = {
     CONVERGED: "converged",
     MAX_ITERATIONS: "Newton did not converge within max_iter",
     SINGULAR: "singular Jacobian (zero pivot in banded LU)",
     NON_FINITE: "non-finite residual or update",
+    ROTATED: "an edge rotated more than NewtonOptions.max_edge_rotation in one step",
 }
 
 
@@ -177,11 +179,23 @@ class NewtonOptions:
     # after a deposit (residuals 1e4-1e9) while q_n converges in 4-5 iterations
     # (benchmarks/RESULTS.md, issue 12, "Δt on the shipped solver").
     predictor_retry: bool = False
+    # A converged step that turns any edge by more than this angle (rad) is rejected like a
+    # failed solve (retried from q_n with predictor_retry, else halved); 0 turns the check
+    # off. Implicit Euler on the vdW contact can converge to a distant root of the step
+    # equations: on the serpentine at half the model's step one step turned an edge by
+    # 116 deg (a hairpin beside the contact, the contact node lifted from y 0.68 to 1.05),
+    # the seed of the defects that made periodic serpentines irregular. At the model's
+    # step no edge turns more than 17.2 deg in a step (v-bar 0.037 and 0.12, 1000 L_vb):
+    # benchmarks/RESULTS.md, issue 12, "Δt on the shipped solver".
+    max_edge_rotation: float = 0.0
 
     def __post_init__(self) -> None:
         p = self.length_projection
         if not (math.isfinite(p) and 0.0 <= p < 1.0):
             raise ValueError(f"NewtonOptions.length_projection must be in [0, 1), got {p!r}")
+        r = self.max_edge_rotation
+        if not (math.isfinite(r) and 0.0 <= r <= math.pi):
+            raise ValueError(f"NewtonOptions.max_edge_rotation must be in [0, pi], got {r!r}")
 
 
 @njit(cache=True)
@@ -570,6 +584,20 @@ def newton_solve(
 
 
 @njit(cache=True)
+def _rotation_status(q: np.ndarray, n_nodes: int, tangents_old: np.ndarray,
+                     cos_max_rotation: float) -> int:  # fmt: skip
+    """ROTATED if some edge's direction at q makes an angle with its start-of-step
+    tangent whose cosine is below ``cos_max_rotation``, else CONVERGED."""
+    for j in range(n_nodes - 1):
+        a, b = 4 * j, 4 * (j + 1)
+        ex, ey, ez = q[b] - q[a], q[b + 1] - q[a + 1], q[b + 2] - q[a + 2]
+        dot = ex * tangents_old[j, 0] + ey * tangents_old[j, 1] + ez * tangents_old[j, 2]
+        if dot < cos_max_rotation * math.sqrt(ex * ex + ey * ey + ez * ez):
+            return ROTATED
+    return CONVERGED
+
+
+@njit(cache=True)
 def implicit_step(
     q: np.ndarray,
     u: np.ndarray,
@@ -623,11 +651,14 @@ def implicit_step(
     transport: bool,
     projection: float,
     retry: bool = False,
+    cos_max_rotation: float = -2.0,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
     step start, predict q_n + dt u_n on free DOFs, solve (with ``retry``, once more from
-    q_n when that fails; out_stats then sum both solves' counts); commit (u, start-of-step
-    frames) on success or restore q and u on failure."""
+    q_n when that fails; out_stats then sum both solves' counts); a converged solution
+    that turns an edge's tangent against ``tangents_old`` below ``cos_max_rotation``
+    counts as failed (ROTATED; -2: no check); commit (u, start-of-step frames) on success
+    or restore q and u on failure."""
     n_dof = 4 * n_nodes - 1
     for k in range(n_dof):
         q_old[k] = q[k]
@@ -660,6 +691,8 @@ def implicit_step(
         its += out_stats[0]
         lus += out_stats[2]
         residual_only += out_stats[3]
+        if status == CONVERGED and cos_max_rotation > -1.0:
+            status = _rotation_status(q, n_nodes, tangents_old, cos_max_rotation)
     out_stats[0] = its
     out_stats[2] = lus
     out_stats[3] = residual_only
@@ -1001,6 +1034,7 @@ class Rod:
             self._force, self._ab, self._ipiv, self._rhs, self._stats,
             self._ab_r, self._free, self._rhs_r, o.residual_check, o.exact_jacobian,
             o.length_projection, o.predictor_retry,
+            math.cos(o.max_edge_rotation) if o.max_edge_rotation > 0.0 else -2.0,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
