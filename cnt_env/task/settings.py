@@ -15,7 +15,6 @@ import numpy as np
 
 from cnt_env.presets import (
     DEFAULT_KAPPA_C,
-    ENV_NEWTON,
     ENV_SIM_DEFAULTS,
     NEWTON,
     graded_coarse,
@@ -169,12 +168,11 @@ def deposition_config(
         "fine_length": mesh["fine_length"],
     }
     cfg.update(ENV_SIM_DEFAULTS["flat" if params.kappa_c_bar is None else "stepped"])
-    cfg["newton"] = dict(ENV_NEWTON)
     cfg.update(mapping_or_none("sim_options", sim_options))
     cfg.update({k: v for k, v in explicit.items() if v is not None})
     if isinstance(cfg.get("newton"), Mapping):  # NewtonOptions fields over the model's
         try:
-            cfg["newton"] = NewtonOptions(**{**NEWTON, **ENV_NEWTON, **cfg["newton"]})
+            cfg["newton"] = NewtonOptions(**{**NEWTON, **cfg["newton"]})
         except TypeError as exc:
             raise ValueError(f"sim_options['newton']: {exc}") from exc
     try:
