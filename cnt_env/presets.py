@@ -18,7 +18,6 @@ from cnt_env.units import PAPER_KAPPA_C_BAR, PRESETS
 __all__ = [
     "DEFAULT_KAPPA_C",
     "DEMO_DEPOSIT",
-    "ENV_NEWTON",
     "ENV_SIM_DEFAULTS",
     "INITIAL_RADIUS",
     "MESH",
@@ -127,11 +126,6 @@ ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingPro
     "flat": MappingProxyType({"dt_factor": 0.1}),
     "stepped": MappingProxyType({"dt_factor": 0.2, "tail_length": 60.0}),
 })  # fmt: skip
-#: NewtonOptions fields the env sets over ``NEWTON``: the edge-rotation check is off in
-#: the env for now. Its step (dt_factor 0.2) turns an edge past 30 deg about once per
-#: 600 L_vb of serpentine (41.6 deg at most), and the committed evaluation and policies
-#: of the routing task were produced without the check (RESULTS.md, issue 12).
-ENV_NEWTON: MappingProxyType[str, Any] = MappingProxyType({"max_edge_rotation": 0.0})
 
 assert set(MESH) == set(PRESETS) == set(RUN_DEPOSIT) == set(RUN_TRANSIENT)
 
