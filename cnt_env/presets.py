@@ -86,7 +86,13 @@ def graded_coarse(coarse_delta: float | None, delta_bar: float) -> float | None:
     multiple of delta_bar, None (a uniform rod) when that is below 2 delta_bar."""
     if coarse_delta is None:
         return None
-    n_fine = round(coarse_delta / delta_bar)  # fine edges per coarse one
+    ratio = coarse_delta / delta_bar if delta_bar > 0 else math.inf
+    if not math.isfinite(ratio):  # a zero, denormal or non-finite delta_bar
+        raise ValueError(
+            f"delta_bar = {delta_bar!r} is not a usable edge length (coarse_delta / delta_bar "
+            "is not finite); use a delta_bar of order 1 L_vb"
+        )
+    n_fine = round(ratio)  # fine edges per coarse one
     return n_fine * delta_bar if n_fine >= 2 else None
 
 

@@ -369,14 +369,16 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
             radius = INITIAL_RADIUS["stepped" if params.is_stepped else "flat"]
         if opts.extra_groups:
             params = dataclasses.replace(params, **opts.extra_groups)
-        coarse = opts.coarse_delta  # None: the preset's graded rod; 0: uniform
-        if coarse is None:
-            coarse = graded_coarse(mesh["coarse_delta"], params.delta_bar)
-        elif coarse == 0:
-            coarse = None
     except (ValueError, TypeError) as exc:
         raise invalid(exc) from exc
-    check_group_range(params)  # before the config's node-count guard, to name the flag
+    # before the graded mesh (coarse / delta) and the config's node-count guard, to name
+    # the flag (a denormal --delta once overflowed there)
+    check_group_range(params)
+    coarse = opts.coarse_delta  # None: the preset's graded rod; 0: uniform
+    if coarse is None:
+        coarse = graded_coarse(mesh["coarse_delta"], params.delta_bar)
+    elif coarse == 0:
+        coarse = None
     try:
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,

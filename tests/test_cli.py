@@ -367,6 +367,7 @@ def test_a_failed_run_keeps_the_old_outputs(tmp_path: Path, monkeypatch) -> None
     [
         (["--Hbar", "1e300"], ["--Hbar", "meaningful range"]),  # defect 6
         (["--delta", "1e-9"], ["--delta"]),
+        (["--delta", "5e-324"], ["--delta", "meaningful range"]),  # coarse/delta overflowed
         (["--deposit", "1e12"], ["--max-nodes"]),
         (["--Ibar", "1e300"], ["--Ibar", "meaningful range"]),  # defect 7
         (["--kappa-c", "0"], ["--kappa-c"]),  # defect 9

@@ -173,7 +173,7 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(sim_options={"no_such_option": 1}), dict(sim_options={"newton": {"tol": 1e-5}}),
      dict(tolerance="wide"), dict(vbar_max=True),
      dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
-     dict(score="corridor", families=("zigzag",))],
+     dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324)],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
