@@ -52,10 +52,11 @@ __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "CNTDepositEnv", "flow_from_action"]
 DEFAULT_VBAR_MAX = 0.13
 #: The default control interval is this many Hbar (time units tau), rounded to whole
 #: physics steps, per score mode. The deposition speed is ~0.80 L_vb / Hbar. "thin" (v0):
-#: ~1.2 L_vb of trace. "corridor": ~24 L_vb, the median trace laid before the suspended
-#: rod leans the new way after a switch of the flow direction (23 at H̄/2, 27 at 8 L_vb;
-#: benchmarks/results/step_response.json), so the agent never acts faster than the rod
-#: can follow; the pattern's drift follows in a median 34 L_vb.
+#: ~1.2 L_vb of trace. "corridor": ~24 L_vb, no more than the median trace laid before
+#: the suspended rod leans the new way after a switch of the flow direction (23-27 L_vb
+#: when chosen; 28-44 re-measured on the shipped simulator, a noisy median over six
+#: switches: benchmarks/results/step_response.json, docs/task.md), so the agent never
+#: acts faster than the rod can follow; the pattern's drift follows in a few intervals.
 CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 30.0}
 #: Trace window (L_vb) the K trace points of the observation span in the route task:
 #: about the 60 L_vb whose mean is the pattern's centre.
@@ -110,9 +111,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     bound acts exactly like the bound); a NaN or infinite action raises ``ValueError`` and
     leaves the env untouched. The flow is held for ``control_interval`` (tau), simulated
     as ``n_substeps`` physics steps of ``dt``. Default: 30 H̄ (~24 L_vb of trace) for
-    routes, the median trace laid before the suspended rod leans the new way after a
-    switch of direction (step response: 23-27 L_vb; the pattern's drift follows in a
-    median 34); 1.5 H̄ (~1.2 L_vb) for ``score="thin"``.
+    routes, no more than the median trace laid before the suspended rod leans the new
+    way after a switch of direction (step response: 23-27 L_vb when chosen, 28-44 on the
+    shipped simulator; docs/task.md); 1.5 H̄ (~1.2 L_vb) for ``score="thin"``.
 
     ## Observation Space
 
