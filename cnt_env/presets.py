@@ -75,7 +75,7 @@ MESH: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
 #: more than 30 deg (``NewtonOptions.max_edge_rotation``; halved instead): at the model's
 #: step no serpentine step turns an edge past 17.2 deg, but at half the step Newton
 #: sometimes converged to a distant root with a hairpin beside the contact, which made
-#: periodic serpentines irregular (RESULTS.md, issue 12, "Δt on the shipped solver").
+#: periodic serpentines irregular (RESULTS.md, issue 12, "The edge-rotation check").
 NEWTON: MappingProxyType[str, Any] = MappingProxyType(
     {"residual_tol": 1e-5, "length_projection": 0.02, "max_edge_rotation": math.radians(30.0)}
 )

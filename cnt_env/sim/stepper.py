@@ -186,7 +186,7 @@ class NewtonOptions:
     # 116 deg (a hairpin beside the contact, the contact node lifted from y 0.68 to 1.05),
     # the seed of the defects that made periodic serpentines irregular. At the model's
     # step no edge turns more than 17.2 deg in a step (v-bar 0.037 and 0.12, 1000 L_vb):
-    # benchmarks/RESULTS.md, issue 12, "Δt on the shipped solver".
+    # benchmarks/RESULTS.md, issue 12, "The edge-rotation check".
     max_edge_rotation: float = 0.0
 
     def __post_init__(self) -> None:
