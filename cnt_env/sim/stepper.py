@@ -216,14 +216,10 @@ def update_frames(
     kappa: np.ndarray,
     twist: np.ndarray,
 ) -> None:
-    """Frames and strains of iterate q, transported from the step-start frame."""
-    n_edges = n_nodes - 1
-    frames.compute_tangents(q, n_nodes, tangents, lengths)
-    frames.time_parallel_frames(tangents_old, d1_old, tangents, n_edges, d1, d2)
-    frames.reference_twist(tangents, d1, ref_twist_old, n_nodes, ref_twist)
-    frames.material_frames(q, d1, d2, n_edges, m1, m2)
-    frames.curvature_binormal(tangents, n_nodes, kb)
-    frames.strains(q, kb, m1, m2, ref_twist, n_nodes, kappa, twist)
+    """Frames and strains of iterate q, transported from the step-start frame (one fused
+    pass, :func:`frames.update_all`)."""
+    frames.update_all(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
+                      d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
 
 
 @njit(cache=True)
