@@ -24,7 +24,14 @@ import numpy as np
 from scipy.linalg import lapack
 
 from cnt_env.rod.banded import KL, KU, band_lu_factor, band_lu_solve
-from cnt_env.sim.stepper import DragParams, Rod, RodMaterial, assemble, update_frames
+from cnt_env.sim.stepper import (
+    SOFT_FRESH,
+    DragParams,
+    Rod,
+    RodMaterial,
+    assemble,
+    update_frames,
+)
 
 
 def make_rod(n_nodes: int) -> Rod:
@@ -71,7 +78,8 @@ def bench(n_nodes: int, repeats: int) -> dict:
                  rod.voronoi_lengths, m.k_s, m.k_b, m.k_t, ws["_m1"], ws["_m2"], ws["_twist"],
                  rod.ext_force, rod.drag_on, rod.flow, d.mu, d.sigma, d.c_sigma, d.law_code,
                  rod.vdw, rod.sub_friction, rod.sub_stiffness, rod.sub_anchor, ws["_force"],
-                 ws["_ab"], ws["_rhs"], rod.tangents_old, rod.options.exact_jacobian)  # fmt: skip
+                 ws["_ab"], ws["_rhs"], rod.tangents_old, rod.options.exact_jacobian, True,
+                 rod._ab_soft, SOFT_FRESH)  # fmt: skip
 
     do_assemble()
     ab0 = ws["_ab"][:, :n].copy(order="F")

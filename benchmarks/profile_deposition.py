@@ -92,7 +92,8 @@ def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
                          rod._twist, rod.ext_force, rod.drag_on, rod.flow, d.mu, d.sigma,
                          d.c_sigma, d.law_code, rod.vdw, rod.sub_friction, rod.sub_stiffness,
                          rod.sub_anchor, rod._force, ab, rhs, rod.tangents_old,
-                         rod.options.exact_jacobian, not reduced)  # fmt: skip
+                         rod.options.exact_jacobian, not reduced, rod._ab_soft,
+                         stepper.SOFT_FRESH)  # fmt: skip
 
     def lu():
         if reduced:

@@ -273,9 +273,10 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
 
 def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
               seed: int = 0) -> str:  # fmt: skip
-    """The point's name in results.jsonl; it names the mesh, Newton tolerance and length
-    projection it ran with, so a change of any of these defaults runs the point again, and
-    a seed other than 0 (the seeded start-up perturbation)."""
+    """The point's name in results.jsonl; it names the mesh, Newton tolerance, length
+    projection, edge-rotation check and lagged Jacobian it ran with, so a change of any
+    of these defaults runs the point again, and a seed other than 0 (the seeded start-up
+    perturbation)."""
     g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
     if "run" in point and not (
         point["preset"] == SERP and tuple(point["run"]) == LEGACY_SERPENTINE_RUN
@@ -289,6 +290,7 @@ def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
     pj = f",proj={proj:g}" if proj else ""
     rot = cfg.newton.max_edge_rotation  # named when on (records before it ran without)
     pj += f",rot={math.degrees(rot):g}" if rot else ""
+    pj += ",lag" if cfg.newton.lagged_jacobian else ""  # named when on, as above
     return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}{pj}"
 
 
@@ -357,6 +359,7 @@ def run_point(
         "residual_tol": cfg.newton.residual_tol,
         "length_projection": cfg.newton.length_projection,
         "max_edge_rotation": cfg.newton.max_edge_rotation,
+        "lagged_jacobian": cfg.newton.lagged_jacobian,
         "contact_mode": cfg.contact.mode,
         "deposit": length,
         "transient": transient,

@@ -317,3 +317,73 @@ def test_length_projection_is_validated() -> None:
     for bad in (-0.1, 1.0, float("nan")):
         with pytest.raises(ValueError, match="length_projection"):
             NewtonOptions(length_projection=bad)
+
+
+@pytest.mark.parametrize("preset, length, keys", [
+    ("coil", 150.0, ("coil_radius",)),
+    ("serpentine", 120.0, ("amplitude", "wavelength")),
+])  # fmt: skip
+def test_lagged_jacobian_keeps_the_solution(preset: str, length: float, keys: tuple) -> None:
+    """NewtonOptions.lagged_jacobian reuses a step's first bend-twist and drag Jacobian
+    blocks in its later iterations: every residual is exact, so at a tolerance both
+    solves stop far inside (1e-8) the trace and figures are the same; the price is a few
+    more iterations per step. Off by default (the reference solver above)."""
+    assert NewtonOptions().lagged_jacobian is False
+    runs = {}
+    for lagged in (False, True):
+        newton = NewtonOptions(residual_tol=1e-8, lagged_jacobian=lagged)
+        sim = DepositionSim(_small(preset, newton), seed=7)
+        sim.run(length)
+        runs[lagged] = sim
+    a, b = runs[False].trace(), runs[True].trace()
+    assert len(a) == len(b) and len(a) >= 0.95 * length
+    assert np.max(np.abs(a - b)) < 1e-4  # L_vb, over the whole trace
+    _assert_same_figures(a, b, preset, keys)
+    it = {k: s.rod.newton_iterations / s.rod.steps for k, s in runs.items()}
+    assert it[False] < it[True] < it[False] + 1.5  # inexact blocks: more, not many more
+
+
+def test_lagged_jacobian_blocks_add_up_to_the_fresh_one() -> None:
+    """stepper.assemble: SOFT_KEEP assembles the fresh Jacobian (the soft blocks summed
+    apart, so equal to round-off) and the residual bit for bit; SOFT_REUSE at the same q
+    gives that Jacobian back; at another q it keeps the soft blocks and recomputes the
+    stiff ones (the stretch Hessian moves, the residual is q's own)."""
+    from cnt_env.rod.banded import band_alloc
+    from cnt_env.sim.stepper import SOFT_FRESH, SOFT_KEEP, SOFT_REUSE, assemble, update_frames
+
+    sim = DepositionSim(_small("serpentine", NewtonOptions()), seed=7)
+    sim.run(40.0)
+    rod = sim.rod
+    n, nd, m, d = rod.n_nodes, rod.n_dof, rod.material, rod.drag
+    q_old = rod.q - sim.dt * rod.u
+    flow = np.array([0.02, 0.0, 0.01])
+    soft = band_alloc(nd)
+
+    def run(q: np.ndarray, mode: int) -> tuple[np.ndarray, np.ndarray]:
+        update_frames(q, n, rod.tangents_old, rod.d1_old, rod.ref_twist_old, rod._tangents,
+                      rod._lengths, rod._d1, rod._d2, rod._ref_twist, rod._m1, rod._m2,
+                      rod._kb, rod._kappa, rod._twist)  # fmt: skip
+        ab, rhs, force = band_alloc(nd), np.zeros(nd), np.zeros(nd)
+        assemble(q, q_old, rod.u, n, sim.dt, rod.mass, rod.fixed, rod.rest_lengths,
+                 rod.voronoi_lengths, m.k_s, m.k_b, m.k_t, rod._m1, rod._m2, rod._twist,
+                 rod.ext_force, rod.drag_on, flow, d.mu, d.sigma, d.c_sigma, d.law_code,
+                 rod.vdw, rod.sub_friction, rod.sub_stiffness, rod.sub_anchor, force, ab, rhs,
+                 rod.tangents_old, False, True, soft, mode)  # fmt: skip
+        return ab, rhs
+
+    q = rod.q.copy()
+    fresh, rhs_fresh = run(q, SOFT_FRESH)
+    kept, rhs_kept = run(q, SOFT_KEEP)
+    np.testing.assert_array_equal(rhs_kept, rhs_fresh)
+    np.testing.assert_allclose(kept, fresh, rtol=1e-12, atol=1e-12 * np.abs(fresh).max())
+    again, _ = run(q, SOFT_REUSE)
+    np.testing.assert_allclose(again, fresh, rtol=1e-12, atol=1e-12 * np.abs(fresh).max())
+    moved = q.copy()
+    free = np.flatnonzero(rod.fixed[:nd] == 0)
+    moved[free] += 1e-2 * np.random.default_rng(0).normal(size=len(free))
+    reused, rhs_reused = run(moved, SOFT_REUSE)
+    fresh_moved, rhs_moved = run(moved, SOFT_FRESH)
+    np.testing.assert_array_equal(rhs_reused, rhs_moved)  # the residual is exact
+    assert not np.allclose(reused, fresh_moved, rtol=1e-9, atol=0.0)  # the soft blocks lag
+    # the difference is the soft blocks' change alone: small against the stiff ones
+    assert np.abs(reused - fresh_moved).max() < 1e-2 * np.abs(fresh_moved).max()

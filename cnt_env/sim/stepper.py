@@ -68,6 +68,8 @@ from cnt_env.sim.forces import (
 )
 
 _DIAG = KL + KU
+# assemble's handling of the soft (bend-twist and drag) Jacobian blocks
+SOFT_FRESH, SOFT_KEEP, SOFT_REUSE = 0, 1, 2
 
 # status codes of newton_solve
 CONVERGED = 0
@@ -188,6 +190,16 @@ class NewtonOptions:
     # step no edge turns more than 17.2 deg in a step (v-bar 0.037 and 0.12, 1000 L_vb):
     # benchmarks/RESULTS.md, issue 12, "The edge-rotation check".
     max_edge_rotation: float = 0.0
+    # Within a step, Newton's later iterations reuse the bend-twist and drag blocks of the
+    # Jacobian from the step's first assembly (stepper.assemble, SOFT_REUSE); the stiff
+    # blocks (stretch, vdW), the substrate and inertia are assembled at every iterate and
+    # every residual is exact, so the equations, the tolerance and the solution are the
+    # same, and the LU is still refactored each iteration (a reused stretch block is what
+    # made chord Newton diverge). Off by default: the iterates differ, so the traces part
+    # as for a change of tolerance. On the env: ~0.5 more iterations per step at ~2/3 of
+    # the cost each, 1.3x the L_vb per CPU-s (benchmarks/RESULTS.md, issue 11, "lagged
+    # soft Jacobian").
+    lagged_jacobian: bool = False
 
     def __post_init__(self) -> None:
         p = self.length_projection
@@ -255,27 +267,49 @@ def assemble(
     rhs: np.ndarray,
     tangents_old: np.ndarray,
     transport: bool,
-    fix_rows: bool = True,
+    fix_rows: bool,
+    ab_soft: np.ndarray,
+    soft: int,
 ) -> float:
     """Residual f (stored as rhs = -f, zero on fixed DOFs) and Jacobian J in band storage
     (identity rows on fixed DOFs). Returns max |f| over free DOFs (inf/NaN propagate).
     ``transport``: J includes the frame-transport terms (exact; elastic.add_bend_twist).
     ``fix_rows`` False leaves the fixed DOFs' rows and columns as assembled, for a caller
-    that drops them (:func:`gather_free`)."""
+    that drops them (:func:`gather_free`).
+
+    ``soft`` (NewtonOptions.lagged_jacobian): SOFT_FRESH assembles every block at q;
+    SOFT_KEEP also keeps the bend-twist and drag blocks of J in ``ab_soft``; SOFT_REUSE
+    takes those two blocks from ``ab_soft`` (an earlier iterate's) and assembles the rest
+    (stretch, vdW, substrate, inertia) at q. The residual is always that of q, and in
+    SOFT_FRESH the operations are those of the plain assembly (the same bits)."""
     n_dof = 4 * n_nodes - 1
     inv_dt2 = 1.0 / (dt * dt)
     for k in range(n_dof):
         force[k] = ext_force[k]
-    band_zero(ab, n_dof)
+    soft_ab = ab  # where the bend-twist and drag blocks go
+    if soft == SOFT_REUSE:
+        for c in range(n_dof):
+            for r in range(LDAB):
+                ab[r, c] = ab_soft[r, c]
+    else:
+        band_zero(ab, n_dof)
+        if soft == SOFT_KEEP:
+            band_zero(ab_soft, n_dof)
+            soft_ab = ab_soft
+    with_soft = soft != SOFT_REUSE
     elastic.add_stretch(q, n_nodes, rest_lengths, k_s, force, ab, True)
-    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, True,
-                           tangents_old, transport, fixed)  # fmt: skip
+    elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, soft_ab,
+                           with_soft, tangents_old, transport, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
         add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                        force, ab, True, fixed)  # fmt: skip
+                        force, soft_ab, with_soft, fixed)  # fmt: skip
     else:
         add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                         force, ab, True, fixed)  # fmt: skip
+                         force, soft_ab, with_soft, fixed)  # fmt: skip
+    if soft == SOFT_KEEP:
+        for c in range(n_dof):
+            for r in range(LDAB):
+                ab[r, c] += ab_soft[r, c]
     add_vdw(q, vdw, force, ab)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
     res = 0.0
@@ -480,6 +514,8 @@ def newton_solve(
     check: bool = True,
     transport: bool = False,
     projection: float = 0.0,
+    ab_soft: np.ndarray | None = None,
+    lagged: bool = False,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
@@ -530,11 +566,14 @@ def newton_solve(
             if res <= tol_abs:
                 status = CONVERGED
                 break
+        soft = SOFT_FRESH
+        if lagged:  # the first assembly of the solve keeps the soft blocks, later ones reuse
+            soft = SOFT_REUSE if n_factor > 0 else SOFT_KEEP
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
                        flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
                        sub_anchor, force, ab, rhs, tangents_old, transport,
-                       not reduced)  # fmt: skip
+                       not reduced, ab_soft, soft)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
             break
@@ -648,6 +687,8 @@ def implicit_step(
     projection: float,
     retry: bool = False,
     cos_max_rotation: float = -2.0,
+    ab_soft: np.ndarray | None = None,
+    lagged: bool = False,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
     step start, predict q_n + dt u_n on free DOFs, solve (with ``retry``, once more from
@@ -682,7 +723,7 @@ def implicit_step(
             sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
             update_tol * min_rest, max_iter, tangents, lengths,
             d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
-            free, rhs_r, check, transport, projection,
+            free, rhs_r, check, transport, projection, ab_soft, lagged,
         )  # fmt: skip
         its += out_stats[0]
         lus += out_stats[2]
@@ -813,6 +854,7 @@ class Rod:
             setattr(self, name, arr)
         self._ab = band_alloc(n_dof_cap)
         self._ab_r = band_alloc(n_dof_cap)  # the free DOFs' system (gather_free)
+        self._ab_soft = band_alloc(n_dof_cap)  # NewtonOptions.lagged_jacobian
         self._free = np.zeros(n_dof_cap, dtype=np.int64)
         self._rhs_r = np.zeros(n_dof_cap)
         self._stats = np.zeros(4)
@@ -1031,6 +1073,7 @@ class Rod:
             self._ab_r, self._free, self._rhs_r, o.residual_check, o.exact_jacobian,
             o.length_projection, o.predictor_retry,
             math.cos(o.max_edge_rotation) if o.max_edge_rotation > 0.0 else -2.0,
+            self._ab_soft, o.lagged_jacobian,
         )  # fmt: skip
 
     def step(self, dt: float) -> None:
