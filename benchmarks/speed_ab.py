@@ -6,9 +6,10 @@ optional Newton options, timed in CPU seconds of this process (the machine is sh
     python benchmarks/speed_ab.py --env --preset coil --steps 100
     python benchmarks/speed_ab.py --preset serpentine --deposit 200 --newton residual_check=False
 
-``--newton name=value`` (repeatable) sets a NewtonOptions field (values are Python
-literals); without any, the code's defaults run, so the same command works on a checkout
-from before issue 11 (the baseline of an A/B pair). ``--measure`` adds the pattern
+``--newton name=value`` (repeatable) sets a NewtonOptions field over the model's
+(``presets.NEWTON``; on a checkout from before it, over the stepper's defaults); values
+are Python literals. Without any, the code's defaults run, so the same command works on
+a checkout from before issue 11 (the baseline of an A/B pair). ``--measure`` adds the pattern
 figures of the run (coil radius, amplitude, wavelength; transient 150 L_vb). Prints one
 JSON line.
 """
@@ -46,7 +47,11 @@ def main(argv: list[str] | None = None) -> None:
     for item in args.newton:
         name, value = item.split("=", 1)
         opts[name] = ast.literal_eval(value)
-    extra = {"newton": NewtonOptions(**opts)} if opts else {}
+    try:  # the model's Newton options, which --newton changes field by field
+        from cnt_env.presets import NEWTON as model_newton
+    except ImportError:  # a checkout from before presets.NEWTON: the stepper's defaults
+        model_newton = {}
+    extra = {"newton": NewtonOptions(**{**model_newton, **opts})} if opts else {}
     out: dict = {"preset": args.preset, "newton": opts}
     if args.env:
         import gymnasium as gym
