@@ -21,8 +21,8 @@ from cnt_env.plotting.topview import lvb_in_um
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 # the table's serpentine run (reproduce.SERPENTINE_RUN, 150 dropped), the model's mesh,
-# tolerance and length projection (presets)
-_MESH = "run=4000-150__coarse=4_fine=20_tol=1e-05_proj=0.02"
+# tolerance, length projection, edge-rotation check and lagged Jacobian (presets)
+_MESH = "run=4000-150__coarse=4_fine=20_tol=1e-05_proj=0.02_rot=30_lag"
 PANELS = (
     (f"reproduce/traces/default__serpentine__vbar=0.005__{_MESH}.npy", "v̄ = 0.005, φ = 0"),
     (
