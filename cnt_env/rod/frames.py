@@ -43,37 +43,49 @@ def cross3(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     out[2] = c2
 
 
+@njit(cache=True, inline="always")
+def _transport3(
+    u0: float, u1: float, u2: float,
+    a0: float, a1: float, a2: float,
+    t0: float, t1: float, t2: float,
+) -> tuple:  # fmt: skip
+    """Parallel transport of (u0, u1, u2) from unit tangent a to unit tangent t, on
+    scalars: rotation about a x t by the angle between them, in the orthonormal bases
+    (a, a x b, b) and (t, t x b, b) with b = (a x t)/|a x t|; the identity when they are
+    parallel. The one home of the formula (:func:`parallel_transport`, :func:`update_all`)."""
+    b0 = a1 * t2 - a2 * t1
+    b1 = a2 * t0 - a0 * t2
+    b2 = a0 * t1 - a1 * t0
+    nb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+    if nb < PARALLEL_EPS:
+        return u0, u1, u2
+    b0 /= nb
+    b1 /= nb
+    b2 /= nb
+    na0 = a1 * b2 - a2 * b1
+    na1 = a2 * b0 - a0 * b2
+    na2 = a0 * b1 - a1 * b0
+    nb0 = t1 * b2 - t2 * b1
+    nb1 = t2 * b0 - t0 * b2
+    nb2 = t0 * b1 - t1 * b0
+    ut = u0 * a0 + u1 * a1 + u2 * a2
+    un = u0 * na0 + u1 * na1 + u2 * na2
+    ub = u0 * b0 + u1 * b1 + u2 * b2
+    return (
+        ut * t0 + un * nb0 + ub * b0,
+        ut * t1 + un * nb1 + ub * b1,
+        ut * t2 + un * nb2 + ub * b2,
+    )
+
+
 @njit(cache=True)
 def parallel_transport(u: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, out: np.ndarray) -> None:
     """Rotate ``u`` about t_a x t_b by the angle that takes unit t_a to unit t_b.
 
     Identity when t_a and t_b are parallel. ``out`` may alias ``u``.
     """
-    b0 = t_a[1] * t_b[2] - t_a[2] * t_b[1]
-    b1 = t_a[2] * t_b[0] - t_a[0] * t_b[2]
-    b2 = t_a[0] * t_b[1] - t_a[1] * t_b[0]
-    nb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-    if nb < PARALLEL_EPS:
-        out[0] = u[0]
-        out[1] = u[1]
-        out[2] = u[2]
-        return
-    b0 /= nb
-    b1 /= nb
-    b2 /= nb
-    # orthonormal bases (t_a, n_a, b) and (t_b, n_b, b) with n = t x b
-    na0 = t_a[1] * b2 - t_a[2] * b1
-    na1 = t_a[2] * b0 - t_a[0] * b2
-    na2 = t_a[0] * b1 - t_a[1] * b0
-    nb0 = t_b[1] * b2 - t_b[2] * b1
-    nb1 = t_b[2] * b0 - t_b[0] * b2
-    nb2 = t_b[0] * b1 - t_b[1] * b0
-    ut = u[0] * t_a[0] + u[1] * t_a[1] + u[2] * t_a[2]
-    un = u[0] * na0 + u[1] * na1 + u[2] * na2
-    ub = u[0] * b0 + u[1] * b1 + u[2] * b2
-    out[0] = ut * t_b[0] + un * nb0 + ub * b0
-    out[1] = ut * t_b[1] + un * nb1 + ub * b1
-    out[2] = ut * t_b[2] + un * nb2 + ub * b2
+    out[0], out[1], out[2] = _transport3(u[0], u[1], u[2], t_a[0], t_a[1], t_a[2],
+                                         t_b[0], t_b[1], t_b[2])  # fmt: skip
 
 
 @njit(cache=True)
@@ -222,39 +234,6 @@ def initial_reference_frame(tangents: np.ndarray, n_edges: int, d1: np.ndarray) 
         n = math.sqrt(dot3(d1[j], d1[j]))
         for k in range(3):
             d1[j, k] /= n
-
-
-@njit(cache=True, inline="always")
-def _transport3(
-    u0: float, u1: float, u2: float,
-    a0: float, a1: float, a2: float,
-    t0: float, t1: float, t2: float,
-) -> tuple:  # fmt: skip
-    """:func:`parallel_transport` of u from unit a to unit t, on scalars (the same
-    operations in the same order, so the same bits)."""
-    b0 = a1 * t2 - a2 * t1
-    b1 = a2 * t0 - a0 * t2
-    b2 = a0 * t1 - a1 * t0
-    nb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-    if nb < PARALLEL_EPS:
-        return u0, u1, u2
-    b0 /= nb
-    b1 /= nb
-    b2 /= nb
-    na0 = a1 * b2 - a2 * b1
-    na1 = a2 * b0 - a0 * b2
-    na2 = a0 * b1 - a1 * b0
-    nb0 = t1 * b2 - t2 * b1
-    nb1 = t2 * b0 - t0 * b2
-    nb2 = t0 * b1 - t1 * b0
-    ut = u0 * a0 + u1 * a1 + u2 * a2
-    un = u0 * na0 + u1 * na1 + u2 * na2
-    ub = u0 * b0 + u1 * b1 + u2 * b2
-    return (
-        ut * t0 + un * nb0 + ub * b0,
-        ut * t1 + un * nb1 + ub * b1,
-        ut * t2 + un * nb2 + ub * b2,
-    )
 
 
 @njit(cache=True)
