@@ -88,20 +88,27 @@ def parallel_transport(u: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, out: np.
                                          t_b[0], t_b[1], t_b[2])  # fmt: skip
 
 
+@njit(cache=True, inline="always")
+def _edge_tangent(q: np.ndarray, j: int) -> tuple:
+    """Length and unit tangent (ln, t0, t1, t2) of edge j."""
+    e0 = q[4 * j + 4] - q[4 * j]
+    e1 = q[4 * j + 5] - q[4 * j + 1]
+    e2 = q[4 * j + 6] - q[4 * j + 2]
+    ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    return ln, e0 / ln, e1 / ln, e2 / ln
+
+
 @njit(cache=True)
 def compute_tangents(
     q: np.ndarray, n_nodes: int, tangents: np.ndarray, edge_lengths: np.ndarray
 ) -> None:
     """Unit tangents and lengths of every edge."""
     for j in range(n_nodes - 1):
-        e0 = q[4 * j + 4] - q[4 * j]
-        e1 = q[4 * j + 5] - q[4 * j + 1]
-        e2 = q[4 * j + 6] - q[4 * j + 2]
-        ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        ln, t0, t1, t2 = _edge_tangent(q, j)
         edge_lengths[j] = ln
-        tangents[j, 0] = e0 / ln
-        tangents[j, 1] = e1 / ln
-        tangents[j, 2] = e2 / ln
+        tangents[j, 0] = t0
+        tangents[j, 1] = t1
+        tangents[j, 2] = t2
 
 
 @njit(cache=True)
@@ -266,14 +273,8 @@ def update_all(
     pm20 = pm21 = pm22 = 0.0
     for j in range(n_nodes - 1):
         # tangent and length (compute_tangents)
-        e0 = q[4 * j + 4] - q[4 * j]
-        e1 = q[4 * j + 5] - q[4 * j + 1]
-        e2 = q[4 * j + 6] - q[4 * j + 2]
-        ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        ln, t0, t1, t2 = _edge_tangent(q, j)
         lengths[j] = ln
-        t0 = e0 / ln
-        t1 = e1 / ln
-        t2 = e2 / ln
         tangents[j, 0] = t0
         tangents[j, 1] = t1
         tangents[j, 2] = t2

@@ -210,28 +210,9 @@ class NewtonOptions:
             raise ValueError(f"NewtonOptions.max_edge_rotation must be in [0, pi], got {r!r}")
 
 
-@njit(cache=True)
-def update_frames(
-    q: np.ndarray,
-    n_nodes: int,
-    tangents_old: np.ndarray,
-    d1_old: np.ndarray,
-    ref_twist_old: np.ndarray,
-    tangents: np.ndarray,
-    lengths: np.ndarray,
-    d1: np.ndarray,
-    d2: np.ndarray,
-    ref_twist: np.ndarray,
-    m1: np.ndarray,
-    m2: np.ndarray,
-    kb: np.ndarray,
-    kappa: np.ndarray,
-    twist: np.ndarray,
-) -> None:
-    """Frames and strains of iterate q, transported from the step-start frame (one fused
-    pass, :func:`frames.update_all`)."""
-    frames.update_all(q, n_nodes, tangents_old, d1_old, ref_twist_old, tangents, lengths,
-                      d1, d2, ref_twist, m1, m2, kb, kappa, twist)  # fmt: skip
+#: Frames and strains of iterate q, transported from the step-start frame (one fused
+#: pass; the stepper's name for :func:`frames.update_all`).
+update_frames = frames.update_all
 
 
 @njit(cache=True)
@@ -511,11 +492,11 @@ def newton_solve(
     ab_r: np.ndarray,
     free: np.ndarray,
     rhs_r: np.ndarray,
-    check: bool = True,
-    transport: bool = False,
-    projection: float = 0.0,
-    ab_soft: np.ndarray | None = None,
-    lagged: bool = False,
+    check: bool,
+    transport: bool,
+    projection: float,
+    ab_soft: np.ndarray,
+    lagged: bool,
 ) -> int:
     """One implicit-Euler step from (q_old, u_old); q holds the initial guess (fixed DOFs
     at their prescribed values) and receives the solution. On return the frame buffers
@@ -685,10 +666,10 @@ def implicit_step(
     check: bool,
     transport: bool,
     projection: float,
-    retry: bool = False,
-    cos_max_rotation: float = -2.0,
-    ab_soft: np.ndarray | None = None,
-    lagged: bool = False,
+    retry: bool,
+    cos_max_rotation: float,
+    ab_soft: np.ndarray,
+    lagged: bool,
 ) -> int:
     """One attempted step of Rod (:meth:`Rod._try_step`) in one compiled call: save the
     step start, predict q_n + dt u_n on free DOFs, solve (with ``retry``, once more from
@@ -1002,15 +983,9 @@ class Rod:
     def elastic_energy(self) -> float:
         """Stretch + bend + twist energy of the current state (frames as last stepped)."""
         n = self.n_nodes
-        frames.compute_tangents(self.q, n, self._tangents, self._lengths)
-        frames.time_parallel_frames(
-            self.tangents_old, self.d1_old, self._tangents, n - 1, self._d1, self._d2
-        )
-        frames.reference_twist(self._tangents, self._d1, self.ref_twist_old, n, self._ref_twist)
-        frames.material_frames(self.q, self._d1, self._d2, n - 1, self._m1, self._m2)
-        frames.curvature_binormal(self._tangents, n, self._kb)
-        frames.strains(self.q, self._kb, self._m1, self._m2, self._ref_twist, n,
-                       self._kappa, self._twist)  # fmt: skip
+        update_frames(self.q, n, self.tangents_old, self.d1_old, self.ref_twist_old,
+                      self._tangents, self._lengths, self._d1, self._d2, self._ref_twist,
+                      self._m1, self._m2, self._kb, self._kappa, self._twist)  # fmt: skip
         m = self.material
         return elastic.stretch_energy(self.q, n, self.rest_lengths, m.k_s) + (
             elastic.bend_twist_energy(
