@@ -18,6 +18,7 @@ from cnt_env.units import PAPER_KAPPA_C_BAR, PRESETS
 __all__ = [
     "DEFAULT_KAPPA_C",
     "DEMO_DEPOSIT",
+    "ENV_MESH",
     "ENV_SIM_DEFAULTS",
     "INITIAL_RADIUS",
     "MESH",
@@ -134,7 +135,17 @@ DEMO_DEPOSIT: float = 300.0
 #: over seeds 0-3 (1500 L_vb, 900 dropped) it moves R0 by +0.15% (7.914 -> 7.926), the
 #: loops' radius under flow by +0.2% (vbar 0.037) and +1.0% (0.13) and their drift per
 #: loop by +2.1% and +4.0%; 4x would move them by up to 13%
-#: (benchmarks/results/env_dt_factor_coil.jsonl).
+#: (benchmarks/results/env_dt_factor_coil.jsonl). Both: a coarser graded rod than
+#: MESH's, edges of 6 L_vb injected and split to delta_bar within 10 L_vb of the contact
+#: (``ENV_MESH``, snapped to delta_bar like MESH's): against 4 / 20 on the shipped solver
+#: it moves the serpentine's A by +0.01 to +0.75% and lambda_x by -0.1 to +0.4% (vbar
+#: 0.019-0.12), the coil's R0 by +0.23%, its loops under flow by +0.1% (vbar 0.037) and
+#: -1.2% / -2.2% in radius / drift (0.13), for 1.26x (serpentine) and 1.4-1.5x (coil) the
+#: L_vb per CPU-s (RESULTS.md, issue 11, "the env's own mesh";
+#: benchmarks/results/speed/env_mesh/).
+ENV_MESH: MappingProxyType[str, float] = MappingProxyType(
+    {"coarse_delta": 6.0, "fine_length": 10.0}
+)
 ENV_SIM_DEFAULTS: MappingProxyType[str, MappingProxyType[str, Any]] = MappingProxyType({
     "flat": MappingProxyType({"dt_factor": 0.1}),
     "stepped": MappingProxyType({"dt_factor": 0.2, "tail_length": 60.0}),

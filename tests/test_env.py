@@ -181,17 +181,19 @@ def test_bad_keywords_raise(bad: dict) -> None:
 
 
 def test_env_speed_settings_by_substrate() -> None:
-    """presets.ENV_SIM_DEFAULTS: a graded suspended rod (coarse 4 L_vb, snapped to a whole
-    multiple of delta_bar, uniform below 2 delta_bar) and Newton at 1e-5 on both
+    """presets.ENV_MESH and ENV_SIM_DEFAULTS: a graded suspended rod (coarse 6 L_vb within
+    10 of the contact, snapped to a whole multiple of delta_bar, uniform below 2
+    delta_bar) and Newton at 1e-5 on both
     substrates; 4x the validated step on the stepped one, 2x on the flat; sim_options
     overrides, with NewtonOptions fields given as a dict."""
     stepped = CNTDepositEnv().config
     flat = CNTDepositEnv(preset="coil").config
     for cfg in (stepped, flat):
-        assert (cfg.coarse_delta, cfg.fine_length, cfg.newton.residual_tol) == (4.0, 20.0, 1e-5)
+        assert (cfg.coarse_delta, cfg.fine_length, cfg.newton.residual_tol) == (6.0, 10.0, 1e-5)
     assert (stepped.dt_factor, stepped.tail_length, flat.dt_factor) == (0.2, 60.0, 0.1)
-    assert CNTDepositEnv(delta_bar=1.5).config.coarse_delta == 4.5
-    assert CNTDepositEnv(delta_bar=3.0, initial_radius=6.5).config.coarse_delta is None
+    assert CNTDepositEnv(delta_bar=1.5).config.coarse_delta == 6.0
+    assert CNTDepositEnv(delta_bar=4.0, initial_radius=8.5).config.coarse_delta == 8.0
+    assert CNTDepositEnv(delta_bar=5.0, initial_radius=10.5).config.coarse_delta is None
     own = CNTDepositEnv(sim_options={"coarse_delta": None, "newton": {"residual_tol": 1e-8}})
     assert own.config.coarse_delta is None and own.config.newton.residual_tol == 1e-8
 

@@ -208,7 +208,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
     | `dt`               | 0.2/0.1 H̄    | stepped/flat time step (tau); ENV_SIM_DEFAULTS  |
-    | `coarse_delta`     | 4.0          | graded mesh (DepositionConfig); presets.MESH    |
+    | `coarse_delta`     | 6.0          | graded mesh (DepositionConfig); ENV_MESH        |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
@@ -242,6 +242,14 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
+    * v0, revision 4 (simulator speed and robustness): the env's suspended rod is graded
+      more coarsely than the model's (``presets.ENV_MESH``: ``coarse_delta`` 6 within
+      ``fine_length`` 10, against ``presets.MESH``'s 4 / 20; serpentine A and lambda
+      within 0.75%, the coil's R0 +0.23%), a step that turns an edge past 30 deg is
+      halved, and Newton keeps a step's soft Jacobian blocks (``presets.NEWTON``):
+      203.8 -> 361.2 L_vb of trace per CPU-second (stepped) and 166.2 -> 326.7 (flat)
+      (RESULTS.md, issue 11); rollouts differ from revision 3's.
+      ``sim_options={"coarse_delta": 4.0, "fine_length": 20.0}`` gives the model's mesh.
     * v0, revision 3 (simulator speed): the suspended rod is graded (``coarse_delta`` 4,
       ``fine_length`` 20) and Newton stops at 1e-5 e_v, on both substrates
       (now the model's own defaults, ``presets.MESH`` and ``presets.NEWTON``; this note

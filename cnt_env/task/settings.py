@@ -15,6 +15,7 @@ import numpy as np
 
 from cnt_env.presets import (
     DEFAULT_KAPPA_C,
+    ENV_MESH,
     ENV_SIM_DEFAULTS,
     NEWTON,
     graded_coarse,
@@ -157,15 +158,15 @@ def deposition_config(
     sim_options: Mapping[str, Any] | None,
     **explicit: float | None,
 ) -> DepositionConfig:
-    """The simulator config: the preset's mesh and start-up radius (``presets.MESH``, the
-    graded rod snapped to a whole multiple of delta_bar), then the env's speed settings
-    (``ENV_SIM_DEFAULTS`` of the substrate), then ``sim_options``, then the ``explicit``
-    keywords that are not None (dt, coarse_delta, initial_radius)."""
+    """The simulator config: the preset's start-up radius (``presets.MESH``), the env's
+    graded rod (``presets.ENV_MESH``, snapped to a whole multiple of delta_bar), then the
+    env's speed settings (``ENV_SIM_DEFAULTS`` of the substrate), then ``sim_options``,
+    then the ``explicit`` keywords that are not None (dt, coarse_delta, initial_radius)."""
     mesh = mesh_for(preset)
     cfg: dict[str, Any] = {
         "initial_radius": mesh["initial_radius"],
-        "coarse_delta": graded_coarse(mesh["coarse_delta"], params.delta_bar),
-        "fine_length": mesh["fine_length"],
+        "coarse_delta": graded_coarse(ENV_MESH["coarse_delta"], params.delta_bar),
+        "fine_length": ENV_MESH["fine_length"],
     }
     cfg.update(ENV_SIM_DEFAULTS["flat" if params.kappa_c_bar is None else "stepped"])
     cfg.update(mapping_or_none("sim_options", sim_options))
