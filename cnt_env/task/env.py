@@ -54,9 +54,9 @@ DEFAULT_VBAR_MAX = 0.13
 #: physics steps, per score mode. The deposition speed is ~0.80 L_vb / Hbar. "thin" (v0):
 #: ~1.2 L_vb of trace. "corridor": ~24 L_vb, no more than the median trace laid before
 #: the suspended rod leans the new way after a switch of the flow direction (23-27 L_vb
-#: when chosen; 28-44, then 15-20 with the lagged Jacobian, re-measured on the shipped
-#: simulator, noisy medians over six switches: benchmarks/results/step_response.json,
-#: docs/task.md), so the agent never
+#: when chosen; 28-44, then 15-20 with the lagged Jacobian, 9-31 with the env's mesh,
+#: re-measured on the shipped simulator, noisy medians over six switches:
+#: benchmarks/results/step_response.json, docs/task.md), so the agent never
 #: acts faster than the rod can follow; the pattern's drift follows in a few intervals.
 CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 30.0}
 #: Trace window (L_vb) the K trace points of the observation span in the route task:
