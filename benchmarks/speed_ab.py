@@ -41,6 +41,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--steps", type=int, default=150)
     ap.add_argument("--measure", action="store_true")
     ap.add_argument("--transient", type=float, default=150.0)
+    ap.add_argument("--seed", type=int, default=0, help="start-up perturbation seed (runs)")
     ap.add_argument("--newton", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args(argv)
     opts = {}
@@ -80,12 +81,12 @@ def main(argv: list[str] | None = None) -> None:
     else:
         cfg = default_config(args.preset, **extra)
         DepositionSim(cfg, seed=0).step()  # compile / load the numba cache outside the timing
-        sim = DepositionSim(cfg, seed=0)
+        sim = DepositionSim(cfg, seed=args.seed)
         t0 = time.process_time()
         sim.run(args.deposit)
         cpu = time.process_time() - t0
         st = sim.stats()
-        out.update(mode="baseline", deposit=args.deposit, cpu_s=round(cpu, 3),
+        out.update(mode="baseline", seed=args.seed, deposit=args.deposit, cpu_s=round(cpu, 3),
                    laid_per_cpu_s=round(st["deposited_length"] / cpu, 2), steps=st["steps"],
                    newton_per_step=round(st["newton_iterations"] / st["steps"], 4),
                    halvings=st["halvings"], events=st["events"])  # fmt: skip
