@@ -42,6 +42,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--measure", action="store_true")
     ap.add_argument("--transient", type=float, default=150.0)
     ap.add_argument("--seed", type=int, default=0, help="start-up perturbation seed (runs)")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a DimensionlessParams group of the run (e.g. Ibar=1000)",
+    )
     ap.add_argument("--newton", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args(argv)
     opts = {}
@@ -79,14 +86,16 @@ def main(argv: list[str] | None = None) -> None:
                    laid_per_cpu_s=round(laid / cpu, 2), physics_steps=phys,
                    control_steps_per_cpu_s=round(args.steps / cpu, 2))  # fmt: skip
     else:
-        cfg = default_config(args.preset, **extra)
+        groups = {k: float(v) for k, v in (item.split("=", 1) for item in args.set)}
+        cfg = default_config(args.preset, **extra, **groups)
         DepositionSim(cfg, seed=0).step()  # compile / load the numba cache outside the timing
         sim = DepositionSim(cfg, seed=args.seed)
         t0 = time.process_time()
         sim.run(args.deposit)
         cpu = time.process_time() - t0
         st = sim.stats()
-        out.update(mode="baseline", seed=args.seed, deposit=args.deposit, cpu_s=round(cpu, 3),
+        out.update(mode="baseline", seed=args.seed, groups=groups, deposit=args.deposit,
+                   cpu_s=round(cpu, 3),
                    laid_per_cpu_s=round(st["deposited_length"] / cpu, 2), steps=st["steps"],
                    newton_per_step=round(st["newton_iterations"] / st["steps"], 4),
                    halvings=st["halvings"], events=st["events"])  # fmt: skip
