@@ -91,13 +91,14 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     adhesion makes it stick (docs/model.md §1, §4). The shape it leaves, the *trace*, is a
     coil on a flat sticky substrate and a serpentine on a stepped one with flow (§5-6).
     The agent sets the rarefied gas flow in the substrate plane every control interval.
-    The flow steers the pattern's *drift*: across the steps (±x) a serpentine band ~27 L_vb
-    wide drifts ~0.21 L_vb per L_vb of trace at v̄ = 0.13; along them (±z) an almost
-    straight run drifts 0.34-0.58 (benchmarks/results/step_response.json).
+    The flow steers the pattern's *drift*: across the steps (±x) a serpentine band 26-39
+    L_vb wide drifts 0.16-0.27 L_vb per L_vb of trace at v̄ = 0.13; along them (±z) an
+    almost straight run drifts 0.62-0.76 (benchmarks/results/step_response.json,
+    docs/task.md).
 
     The task (``score="corridor"``, default; docs/task.md): lay the trace along a circuit
     route (:class:`~cnt_env.task.routes.Route`): waypoints from the contact point, a
-    corridor of half-width w (default 15 L_vb), optional pads to cross and keep-out
+    corridor of half-width w (default 18.5 L_vb), optional pads to cross and keep-out
     regions to avoid. ``score="thin"`` keeps the v0 task: follow a thin polyline within
     τ_b = ``tolerance`` (:mod:`cnt_env.task.targets`).
 
