@@ -41,7 +41,7 @@ def run_case(case: dict) -> dict:
     changes = {} if case["validated"] or not stepped else dict(ENV_SIM_DEFAULTS["stepped"])
     # the study ran at residual 1e-8 e_v (the model's default when it ran); --newton model
     # runs the shipped solver (presets.NEWTON), as the env does
-    if case.get("newton", "strict") == "strict":
+    if case["newton"] == "strict":
         changes["newton"] = NewtonOptions(residual_tol=1e-8)
     # the mesh is what this benchmark varies: "none" is the uniform rod
     changes.update(coarse_delta=case["coarse"], fine_length=case["fine"] or 20.0)

@@ -51,6 +51,8 @@ def main(argv: list[str] | None = None) -> None:
     )
     ap.add_argument("--newton", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args(argv)
+    if args.env and (args.set or args.seed):
+        ap.error("--set and --seed apply to runs, not to --env (the env's seed 0 and groups)")
     opts = {}
     for item in args.newton:
         name, value = item.split("=", 1)

@@ -9,7 +9,8 @@ it, optional ``pads`` (segments the trace must cross, like electrodes) and optio
 The corridor's default half-width, :data:`DEFAULT_HALF_WIDTH`, comes from the measured
 band widths (``benchmarks/results/step_response.json``): a constant flow across the steps
 lays a serpentine band 34 L_vb peak-to-peak at v̄ = 0.13, 37 at 0.1 and 51 at 0.065 (36, 33
-and 47, then 35, 34 and 49, re-measured on the shipped simulator, docs/task.md); along
+and 47, then 35, 34 and 49, then 35, 32 and 32 with the env's graded rod, re-measured on
+the shipped simulator, docs/task.md); along
 the steps an almost straight run. A corridor of half-width 18.5 holds the narrowest band
 (v̄ = v̄_max) with a little room to steer. Route lengths scale with it
 (:data:`ROUTE_SCALE`).
