@@ -12,7 +12,7 @@ Each (variant, family, seed) is one episode of the config's env with
 episode (score, precision, progress, shorts, steps); then the mean score per variant and
 family. The default variants: ``round3`` (no plan, the window's mean, the plain
 repulsion: the follower before this study), ``plan`` (plan around keep-outs, memory 0),
-``default`` (the shipped options).
+``lead0`` (no predicted centre), ``default`` (the shipped options).
 """
 
 from __future__ import annotations
@@ -26,8 +26,9 @@ from pathlib import Path
 
 FAMILIES = ("straight", "l_route", "u_route", "staircase", "arc", "band", "pads", "detour")
 VARIANTS = {
-    "round3": {"plan": False, "observed_band": False, "memory": 0},
-    "plan": {"memory": 0},
+    "round3": {"plan": False, "observed_band": False, "memory": 0, "lead": 0.0},
+    "plan": {"memory": 0, "lead": 0.0},
+    "lead0": {"lead": 0.0},
     "default": {},
 }
 ROOT = Path(__file__).resolve().parents[1]

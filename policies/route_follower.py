@@ -16,6 +16,10 @@ line). Without the route it uses the window's mean. Then:
   centre (default 20 L_vb, about one control step of trace; on u_turn, l_up,
   detour_block and staircase3, seed 0, it scored a mean 0.76 against 0.70 at 12 and 0.75
   at 30);
+* the centre it steers is *predicted* ``lead`` control steps ahead (default 1), at the
+  drift of the last step: the rod answers a new flow about one control step late
+  (docs/task.md), and a follower steering the centre it sees overshoots the corners
+  (a run along the steps drifts ~17 L_vb per step) into the keep-out beyond them;
 * the flow points from the centre to the aim, plus ``gain`` times the centre's offset
   across the route (back toward the route's line, which the drift alone corrects slowly);
 * keep-outs (a short circuit zeroes the score after 20 nodes): with the route known
@@ -45,6 +49,13 @@ over 8 families x seeds 0-2 the mean score is 0.814 for the round-3 follower (no
 the window's mean), 0.807 with the plan alone, 0.870 with the plan and the memory (the
 defaults); on 8 detour routes (seeds 0-7): 0.20, 0.50, 0.55. Routes without keep-outs
 are unchanged by the plan; the memory moves them by -0.05 (straight) to +0.08 (band).
+The lead (study "2026-11-25 lead" in the same file, the shipped simulator, 8 families x
+seeds 0-5): mean 0.819 without it (``lead`` 0), 0.858 at 1, 0.865 at 2; on detour routes
+(seeds 0-7) 0.52 / 0.67 / 0.69, the other families within ±0.05 each (per-family
+seed noise ~0.03). 1 is the default: the measured lag, and 2 is not distinguishable from
+it. A probe that capped the plan's band at the corridor half-width (instead of the
+widest band seen) raised the detours' precision but shorted 3 of 8 (0.47 against 0.51)
+and was dropped.
 """
 
 from __future__ import annotations
@@ -83,6 +94,7 @@ class RouteFollower:
         plan_spacing: float = 1.0,
         behind: float = 30.0,
         memory: int = 4,
+        lead: float = 1.0,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -103,6 +115,10 @@ class RouteFollower:
         if int(memory) < 0:
             raise ValueError(f"memory must be >= 0 control steps, got {memory!r}")
         self.memory = int(memory)
+        if not (math.isfinite(lead) and lead >= 0.0):
+            raise ValueError(f"lead must be >= 0 control steps, got {lead!r}")
+        self.lead = float(lead)
+        self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
         self._env = None  # set by from_env: where the route (and its keep-outs) comes from
         self._route = None  # the route of the state below (cleared when it changes)
         self._route_pts = self._route_s = None
@@ -136,6 +152,7 @@ class RouteFollower:
         if route is not self._route:
             self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
+            self._prev_centre = None
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
         self._s_next = min(float(o[self.slices["progress"].start]) * s[-1] + self.spacing, s[-1])
@@ -216,6 +233,18 @@ class RouteFollower:
         seen = np.concatenate(self._windows)
         return 0.5 * (seen.max(axis=0) + seen.min(axis=0)) - contact
 
+    def predicted_centre(self, centre: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
+        """Where the centre will be ``lead`` control steps on, at the drift of the last
+        step (centre + lead x its last displacement): the rod answers a new flow about
+        one control step late (docs/task.md), so a follower that steers the centre it
+        sees overshoots the corners. Needs the route (``contact``, its frame); the first
+        step of a route has no displacement yet."""
+        if contact is None or self.lead == 0.0:
+            return centre
+        now = centre + contact
+        prev, self._prev_centre = self._prev_centre, now
+        return centre if prev is None else centre + self.lead * (now - prev)
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         o = np.asarray(obs, dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
@@ -223,7 +252,7 @@ class RouteFollower:
         route = o[self.slices["route"]]
         width, keep = float(route[0]), route[1:3]
         contact = self.contact_on_route(o, ahead)
-        centre = self.pattern_centre(past, contact)
+        centre = self.predicted_centre(self.pattern_centre(past, contact), contact)
         vbar = self.speed_for(width)
         half = self.band_half_widths(past, centre, vbar)
         planned = self.planned_ahead(contact, len(ahead), half)

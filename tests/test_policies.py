@@ -219,3 +219,26 @@ def test_route_follower_centre_is_the_midpoint_of_its_last_windows() -> None:
     assert flat.pattern_centre(w1, np.zeros(2)) == pytest.approx(w1.mean(axis=0))
     with pytest.raises(ValueError, match="memory"):
         RouteFollower(layout.slices, 0.13, memory=-1)
+
+
+def test_route_follower_leads_the_centre_by_its_last_displacement() -> None:
+    """The predicted centre is the centre plus ``lead`` times its displacement over the
+    last control step, measured in the route's frame (the contact point moves between
+    steps); the first step of a route, no route, or lead 0 give the centre itself."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    layout = ObservationLayout(4, 4, (2.0,), route=True)
+    pol = RouteFollower(layout.slices, 0.13, lead=2.0)
+    c0, c1 = np.array([-3.0, 1.0]), np.array([-2.0, 4.0])
+    assert pol.predicted_centre(c0, np.array([10.0, 0.0])) == pytest.approx(c0)
+    # in the route's frame the centre went from (7, 1) to (13, 4): moved (6, 3)
+    got = pol.predicted_centre(c1, np.array([15.0, 0.0]))
+    assert got == pytest.approx(c1 + 2.0 * np.array([6.0, 3.0]))
+    assert pol.predicted_centre(c1, None) == pytest.approx(c1)
+    still = RouteFollower(layout.slices, 0.13, lead=0.0)
+    still.predicted_centre(c0, np.zeros(2))
+    assert still.predicted_centre(c1, np.zeros(2)) == pytest.approx(c1)
+    for bad in (-1.0, math.nan):
+        with pytest.raises(ValueError, match="lead"):
+            RouteFollower(layout.slices, 0.13, lead=bad)
