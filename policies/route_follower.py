@@ -50,12 +50,12 @@ the window's mean), 0.807 with the plan alone, 0.870 with the plan and the memor
 defaults); on 8 detour routes (seeds 0-7): 0.20, 0.50, 0.55. Routes without keep-outs
 are unchanged by the plan; the memory moves them by -0.05 (straight) to +0.08 (band).
 The lead (study "2026-11-25 lead" in the same file, the shipped simulator, 8 families x
-seeds 0-5): mean 0.819 without it (``lead`` 0), 0.858 at 1, 0.865 at 2; on detour routes
-(seeds 0-7) 0.52 / 0.67 / 0.69, the other families within ±0.05 each (per-family
-seed noise ~0.03). 1 is the default: the measured lag, and 2 is not distinguishable from
-it. A probe that capped the plan's band at the corridor half-width (instead of the
-widest band seen) raised the detours' precision but shorted 3 of 8 (0.47 against 0.51)
-and was dropped.
+seeds 0-5): mean 0.855 without it (``lead`` 0), 0.883 at 1, 0.884 at 2; on detour routes
+(seeds 0-7) 0.51 / 0.67 / 0.67; the other families move by -0.013 (staircase) to +0.073
+(pads) at lead 1 (per-family seed noise ~0.03). 1 is the default: the measured lag; 2
+is not distinguishable from it. A probe that capped the plan's band at the corridor
+half-width (instead of the widest band seen) raised the detours' precision but shorted 3
+of 8 (0.47 against 0.51) and was dropped.
 """
 
 from __future__ import annotations
