@@ -232,6 +232,20 @@ def test_route_families_are_valid_and_scale_with_difficulty() -> None:
     assert len(routes.draw("pads", np.random.default_rng(0)).pads) >= 1
 
 
+def test_a_family_named_twice_is_drawn_twice_as_often() -> None:
+    """``families`` is a list to draw from uniformly: repeating a name weights it (the
+    keep-out curriculum, training/configs/ppo_keepout.yml)."""
+    from cnt_env.task import routes
+
+    rng = np.random.default_rng(0)
+    n = 3000
+    names = [routes.sample(rng, ("straight", "detour", "detour"), 0.0).name for _ in range(n)]
+    share = names.count("detour") / n
+    # binomial: sd of the share = sqrt(2/9 / n) ~ 0.0086; 2/3 within 4 sd
+    assert abs(share - 2.0 / 3.0) < 0.035, share
+    assert set(names) == {"straight", "detour"}
+
+
 def test_held_out_routes_are_fixed_and_never_sampled() -> None:
     from cnt_env.task import routes
 

@@ -221,7 +221,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `score`            | "corridor"   | "corridor" (routes) or "thin" (v0 polylines)    |
     | `route_width`      | 18.5         | corridor half-width of bare polylines (L_vb)    |
     | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]      |
-    | `families`         | all          | training families (routes.FAMILIES / targets)   |
+    | `families`         | all          | families drawn uniformly; repeat one to weight  |
     | `trace_window`     | 64 / None    | span of the observed trace points (L_vb)        |
     | `tolerance`        | 2.0          | thin: tolerance band τ_b (L_vb)                 |
     | `n_trace_points`   | 16           | K                                               |
