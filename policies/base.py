@@ -8,13 +8,22 @@ randomness reseed; closed-loop ones clear their memory).
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+import inspect
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from cnt_env.task.spaces import action_from_flow, flow_from_action
 
-__all__ = ["ConstantPolicy", "Policy", "RandomPolicy", "action_from_flow"]
+__all__ = ["ConstantPolicy", "Policy", "RandomPolicy", "action_from_flow", "option_defaults"]
+
+
+def option_defaults(cls: type, exclude: tuple[str, ...]) -> dict[str, Any]:
+    """The keyword defaults of ``cls.__init__`` but ``exclude`` (what the env supplies):
+    a policy's options, in one home (its signature)."""
+    params = inspect.signature(cls.__init__).parameters.values()
+    return {p.name: p.default for p in params
+            if p.default is not p.empty and p.name not in exclude}  # fmt: skip
 
 
 @runtime_checkable

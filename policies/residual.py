@@ -11,7 +11,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BASES", "WRAPPER", "combine", "make_base_policy", "residual_settings", "zoo_entry"]
+__all__ = [
+    "BASES",
+    "WRAPPER",
+    "base_options",
+    "combine",
+    "make_base_policy",
+    "pin_base",
+    "residual_settings",
+    "zoo_entry",
+]
 
 #: Base policies a residual agent can correct.
 BASES = ("scripted",)
@@ -40,21 +49,65 @@ def zoo_entry(entries: Any, name: str) -> dict[str, Any] | None:
     return None
 
 
+def pin_base(entry: dict, score_mode: str) -> dict:
+    """A copy of the rl-zoo config entry ``entry`` whose residual settings (if any) hold
+    every option of the base (:func:`base_options`) under ``base_kwargs``: written beside
+    a trained model, so it loads with the base it was trained on."""
+    residual = residual_settings(entry)
+    if residual is None:
+        return dict(entry)
+    pinned = {
+        **residual,
+        "base_kwargs": base_options(
+            residual.get("base", "scripted"), score_mode, residual.get("base_kwargs")
+        ),
+    }
+    out = dict(entry)
+    if entry.get("residual"):
+        out["residual"] = pinned
+        return out
+    wrappers = entry["env_wrapper"]
+    wrappers = wrappers if isinstance(wrappers, list) else [wrappers]
+    out["env_wrapper"] = [
+        {WRAPPER: pinned} if (w == WRAPPER or (isinstance(w, dict) and WRAPPER in w)) else w
+        for w in wrappers
+    ]
+    return out
+
+
 def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.ndarray:
     """clip(base + scale * residual, -1, 1) as float32."""
     a = np.asarray(base_action, dtype=np.float64) + scale * np.asarray(residual, dtype=np.float64)
     return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
-def make_base_policy(name: str, env):
-    """The base policy ``name`` for ``env`` (a CNTDeposit-v0, wrapped or not): "scripted"
-    is the scripted baseline of its task (the route follower for ``score="corridor"``,
-    the tangent heuristic for ``"thin"``)."""
+def _base_class(name: str, score_mode: str):
     from .route_follower import RouteFollower
     from .scripted import ScriptedPolicy
 
     if name not in BASES:
         raise ValueError(f"unknown residual base {name!r}; choose one of {BASES}")
-    if env.unwrapped.score_mode == "corridor":
-        return RouteFollower.from_env(env)
-    return ScriptedPolicy.from_env(env)
+    return RouteFollower if score_mode == "corridor" else ScriptedPolicy
+
+
+def base_options(name: str, score_mode: str, base_kwargs: dict | None = None) -> dict:
+    """Every option of the base policy ``name`` for the task ``score_mode``: its
+    defaults, overridden by ``base_kwargs``. The training run writes them into the
+    model's config (``env_wrapper`` ``base_kwargs``), so a model keeps the base it was
+    trained on when the base's defaults change later. An unknown option raises."""
+    cls = _base_class(name, score_mode)
+    defaults = cls.OPTIONS
+    unknown = set(base_kwargs or {}) - set(defaults)
+    if unknown:
+        raise ValueError(f"unknown option(s) {sorted(unknown)} of the {cls.__name__} base; "
+                         f"its options are {sorted(defaults)}")  # fmt: skip
+    return {**defaults, **(base_kwargs or {})}
+
+
+def make_base_policy(name: str, env, base_kwargs: dict | None = None):
+    """The base policy ``name`` for ``env`` (a CNTDeposit-v0, wrapped or not): "scripted"
+    is the scripted baseline of its task (the route follower for ``score="corridor"``,
+    the tangent heuristic for ``"thin"``), with ``base_kwargs`` (:func:`base_options`)."""
+    score_mode = env.unwrapped.score_mode
+    cls = _base_class(name, score_mode)
+    return cls.from_env(env, **base_options(name, score_mode, base_kwargs))

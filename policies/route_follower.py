@@ -69,6 +69,7 @@ from cnt_env.task.geometry import inside_polygon, nearest_on_boundary
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
 
+from .base import option_defaults
 from .scripted import amplitude_curve
 
 __all__ = ["RouteFollower"]
@@ -139,6 +140,10 @@ class RouteFollower:
 
     def reset(self, seed: int | None = None) -> None:
         self._route = None
+
+    def options(self) -> dict:
+        """This follower's options (:data:`OPTIONS` keys), as set."""
+        return {k: getattr(self, k) for k in self.OPTIONS}
 
     def contact_on_route(self, o: np.ndarray, ahead: np.ndarray) -> np.ndarray | None:
         """The contact point in the route's frame, None without the route (no env).
@@ -277,6 +282,10 @@ class RouteFollower:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])
         return action_from_flow(vbar, phi, self.vbar_max)
+
+
+#: The follower's options and their defaults (the spacing comes from the env).
+RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

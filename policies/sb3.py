@@ -331,7 +331,9 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
                 trust: bool = False, env=None) -> SB3Policy:  # fmt: skip
     """Load ``model_path`` (``.zip``; ``algo`` from the file name if not given), the
     VecNormalize statistics beside it, if any, and, if the resolved config beside it
-    (``<name>.yml``) says the agent is residual, its base policy.
+    (``<name>.yml``) says the agent is residual, its base policy with the options that
+    config pins (``base_kwargs``; a config without them gets today's defaults, and a
+    warning).
 
     ``env`` is the env the policy will act in. A residual agent's base (the route
     follower) reads the episode's route from it, as it did in training (its plan around
@@ -378,7 +380,15 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
                 env_kwargs = dict(entry.get("env_kwargs") or {})
                 env_kwargs.pop("max_episode_steps", None)  # gymnasium.make's, not the env's
                 env = CNTDepositEnv(**env_kwargs)
-            base = make_base_policy(residual.get("base", "scripted"), env)
+            if "base_kwargs" not in residual:
+                import warnings
+
+                warnings.warn(f"{cfg_path.name} does not pin the options of the residual "
+                              "agent's base (a config written before they were pinned): it "
+                              "gets today's defaults, which may differ from those it was "
+                              "trained on", stacklevel=2)  # fmt: skip
+            base = make_base_policy(residual.get("base", "scripted"), env,
+                                    residual.get("base_kwargs"))  # fmt: skip
             scale = float(residual.get("scale", 0.5))
     return SB3Policy(model, vn, name=algo, base=base, scale=scale)
 

@@ -28,6 +28,8 @@ import numpy as np
 
 from cnt_env.task.spaces import action_from_flow
 
+from .base import option_defaults
+
 __all__ = ["CURVE_RESOURCE", "ScriptedPolicy", "amplitude_curve", "amplitude_curve_from_csv"]
 
 #: The packaged amplitude curve (policies/data/amplitude_curve.json, package data).
@@ -100,6 +102,10 @@ class ScriptedPolicy:
     def reset(self, seed: int | None = None) -> None:
         pass
 
+    def options(self) -> dict:
+        """This policy's options (:data:`OPTIONS` keys), as set."""
+        return {k: getattr(self, k) for k in self.OPTIONS}
+
     def speed_for(self, half_width: float) -> float:
         """v̄ whose measured amplitude is closest to ``half_width`` (L_vb)."""
         return float(np.interp(half_width, self._amp, self._vbar))
@@ -119,3 +125,7 @@ class ScriptedPolicy:
         else:
             half_width = 0.0
         return action_from_flow(self.speed_for(half_width), phi, self.vbar_max)
+
+
+#: The heuristic's options and their defaults (a custom ``curve`` is not one: it is data).
+ScriptedPolicy.OPTIONS = option_defaults(ScriptedPolicy, ("curve",))

@@ -194,7 +194,8 @@ def test_validation_eval_routes_are_fixed_family_draws() -> None:
 
 def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: Path) -> None:
     """A run evaluated on validation routes is drawn with the follower and random scored
-    on those same routes (cached in the run), not with held-out rows."""
+    on those same routes, not with held-out rows; cnt-evaluate caches them in its own
+    output (the run may be a committed result), a direct call in the run."""
     import yaml
 
     from training.evaluate import eval_set_baselines, plot_learning_curves
@@ -209,19 +210,39 @@ def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: 
     (run / "config.yml").write_text(yaml.safe_dump({"CNTDeposit-v0": cfg, "run": meta}))
     np.savez(run / "evaluations.npz", timesteps=np.array([10, 20]),
              results=np.array([[0.1, 0.2], [0.3, 0.4]]))  # fmt: skip
-    assert plot_learning_curves([run], tmp_path, rows=[])
-    assert (tmp_path / "learning_curves.png").is_file()
-    cached = json.loads((run / "eval_baselines.json").read_text())
+    out = tmp_path / "out"
+    out.mkdir()
+    assert plot_learning_curves([run], out, rows=[])
+    assert (out / "learning_curves.png").is_file()
+    assert sorted(p.name for p in run.iterdir()) == ["config.yml", "evaluations.npz"]
+    mine = out / "eval_baselines_ppo_residual_s0.json"
+    cached = json.loads(mine.read_text())
     assert cached["eval_targets"] == ["validation", "validation"] and cached["n"] == 2
     assert set(cached["scores"]) == {"scripted", "random"}
     assert all(0.0 <= v <= 1.0 for v in cached["scores"].values())
-    # the cache is what a second call reads
+    # the cache is what a second call reads, from the output or from the run
     cached["scores"] = {"scripted": 0.5, "random": 0.25}
+    mine.write_text(json.dumps(cached))
+    assert eval_set_baselines(run, cache_dir=out) == {"scripted": 0.5, "random": 0.25}
+    mine.unlink()
     (run / "eval_baselines.json").write_text(json.dumps(cached))
     assert eval_set_baselines(run) == {"scripted": 0.5, "random": 0.25}
     # ... unless the baselines' code changed since (a follower improved): scored again
     (run / "eval_baselines.json").write_text(json.dumps({**cached, "code": "older"}))
     assert eval_set_baselines(run) != {"scripted": 0.5, "random": 0.25}
+
+
+def test_tables_without_random_say_why_there_is_no_normalised_score() -> None:
+    from training.evaluate import NO_FLOOR, _format_table, aggregate, markdown_tables
+
+    rows = [{"policy": "scripted", "target": "u_turn", "seed": s, "score": 0.9,
+             "coverage": 1.0, "precision": 0.9, "progress": 1.0, "mean_distance": 3.0,
+             "is_success": True}
+            for s in (0, 1)]  # fmt: skip
+    table = aggregate(rows, ["scripted"], ["u_turn"], [0, 1])
+    md, text = markdown_tables(table), _format_table(table)
+    assert "nan" not in md and "nan" not in text
+    assert "| n/a |" in md and NO_FLOOR in md and NO_FLOOR in text
 
 
 def test_baseline_cache_key_follows_the_simulator(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -233,3 +254,39 @@ def test_baseline_cache_key_follows_the_simulator(monkeypatch: pytest.MonkeyPatc
     before = evaluate._baselines_code()
     monkeypatch.setattr(warmstart, "source_fingerprint", lambda: "another simulator")
     assert evaluate._baselines_code() != before
+
+
+def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
+    """A residual run writes every option of its base follower beside the model, and the
+    model loads with them: a later change of the follower's defaults does not change the
+    base a trained agent acts on. A config without them warns; an unknown option raises."""
+    import gymnasium as gym
+    import yaml
+
+    from policies import RouteFollower
+    from policies.residual import base_options
+    from training.train import train
+
+    config = {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+        {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3,
+                                            "base_kwargs": {"lead": 0.0}}}]}  # fmt: skip
+    model = train("ppo", config, tmp_path / "resid", seed=0, progress_bar=False)
+    entry = yaml.safe_load(model.with_suffix(".yml").read_text())["CNTDeposit-v0"]
+    pinned = entry["env_wrapper"][0]["training.common.ResidualAction"]["base_kwargs"]
+    assert pinned == {**RouteFollower.OPTIONS, "lead": 0.0}
+    env = gym.make("CNTDeposit-v0", **SMALL)
+    policy = load_policy(model, env=env)
+    assert isinstance(policy.base, RouteFollower) and policy.base.options() == pinned
+
+    # an unpinned config (written before pinning) gets today's defaults, with a warning
+    del entry["env_wrapper"][0]["training.common.ResidualAction"]["base_kwargs"]
+    model.with_suffix(".yml").write_text(yaml.safe_dump({"CNTDeposit-v0": entry}))
+    from policies.sb3 import write_manifest
+
+    listed = json.loads((model.parent / "MANIFEST.json").read_text())["sha256"]
+    write_manifest(model.parent, list(listed))
+    with pytest.warns(UserWarning, match="does not pin"):
+        assert load_policy(model, env=env).base.options() == RouteFollower.OPTIONS
+    env.close()
+    with pytest.raises(ValueError, match="unknown option"):
+        base_options("scripted", "corridor", {"lookahaed": 10.0})

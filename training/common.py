@@ -160,12 +160,15 @@ class ResidualAction(gym.Wrapper):
     clip(base(obs) + scale * a, -1, 1). The base is the scripted heuristic
     (policies/scripted.py), so a barely trained agent already acts like it.
 
-    The wrapper sits below VecNormalize: the base sees the raw observation."""
+    The wrapper sits below VecNormalize: the base sees the raw observation.
+    ``base_kwargs`` are the base's options (policies/residual.py ``base_options``; its
+    defaults when omitted); the trained model's config pins them."""
 
-    def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5) -> None:
+    def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5,
+                 base_kwargs: dict[str, Any] | None = None) -> None:  # fmt: skip
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
-        self.base = make_base_policy(base, env)
+        self.base = make_base_policy(base, env, base_kwargs)
         self._obs: np.ndarray | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

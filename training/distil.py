@@ -171,6 +171,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
+    from policies.residual import pin_base
     from policies.sb3 import save_vecnormalize, vecnormalize_path, write_manifest
 
     from .common import ENV_ID, ResidualAction, algo_kwargs, limit_threads, load_config, make_env
@@ -254,6 +255,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: 
     entry["env_kwargs"] = {**entry.get("env_kwargs", {}), "difficulty": difficulty}
     entry["env_wrapper"] = [{"training.common.ResidualAction": {"base": "scripted",
                                                                 "scale": scale}}]  # fmt: skip
+    entry = pin_base(entry, venv.get_attr("score_mode", [0])[0])
     summaries = [e["summary"] for e in eps]
     entry["distil"] = {"scale": scale, "margin": margin, "epochs": epochs, "seed": seed,
                        "fit": report, "label_wall_s": sum(s["wall_s"] for s in summaries),

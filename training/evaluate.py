@@ -395,19 +395,25 @@ def _baselines_code() -> str:
     return h.hexdigest()[:16]
 
 
-def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random")) -> dict:
+def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random"),
+                       cache_dir: Path | None = None) -> dict:  # fmt: skip
     """Mean final score of the no-model ``policies`` on a run's EvalCallback episodes
     (the same routes and reset seeds, :class:`training.common.HeldOutCycle`), for runs
     evaluated on validation routes, which ``cnt-evaluate`` does not score otherwise.
     Cached in ``<run>/eval_baselines.json`` (recomputed if its routes or the baselines'
-    code differ)."""
+    code differ). With ``cache_dir`` a recomputed cache goes to
+    ``<cache_dir>/eval_baselines_<run name>.json`` instead, and the run (perhaps a
+    committed result) is only read."""
     run = Path(run)
     targets, n, _, _, cfg = _run_info(run)
     cache = run / "eval_baselines.json"
+    mine = cache if cache_dir is None else Path(cache_dir) / f"eval_baselines_{run.name}.json"
     code = _baselines_code()
-    if cache.is_file():
+    for path in dict.fromkeys((cache, mine)):
+        if not path.is_file():
+            continue
         try:
-            data = json.loads(cache.read_text())
+            data = json.loads(path.read_text())
             if (data.get("eval_targets") == list(targets) and data.get("n") == n
                     and data.get("code") == code):  # fmt: skip
                 return {p: float(data["scores"][p]) for p in policies}
@@ -425,8 +431,8 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
             vals.append(float(_play(env, policy, obs)[2]["score"]))
         env.close()
         scores[p] = float(np.mean(vals))
-    cache.write_text(json.dumps({"eval_targets": list(targets), "n": n, "code": code,
-                                 "scores": scores}) + "\n")  # fmt: skip
+    mine.write_text(json.dumps({"eval_targets": list(targets), "n": n, "code": code,
+                                "scores": scores}) + "\n")  # fmt: skip
     return scores
 
 
@@ -457,7 +463,7 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
             ax.plot(t, m, marker="o", label=label, color=color)
             ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
         if VALIDATION in targets:
-            base = eval_set_baselines(curves[0][0])
+            base = eval_set_baselines(curves[0][0], cache_dir=out)
             where = f"{len(targets)} validation routes"
         else:
             base = {}
@@ -656,7 +662,9 @@ def markdown_tables(table: Sequence[dict[str, Any]]) -> str:
            "|---|---|---|---|---|---|"]  # fmt: skip
     for r in overall:
         cells = " | ".join(f"{r[f'{k}_mean']:.3f} ± {r[f'{k}_std']:.3f}" for k in cols)
-        out.append(f"| {r['policy']} | {cells} | {round(r['normalized_score'], 6) + 0.0:.3f} |")
+        out.append(f"| {r['policy']} | {cells} | {_normalised(r)} |")
+    if any(math.isnan(r["normalized_score"]) for r in overall):
+        out += ["", NO_FLOOR]
     targets = list(dict.fromkeys(r["target"] for r in table if r["target"] != "ALL"))
     policies = [r["policy"] for r in overall]
     cell = {(r["policy"], r["target"]): r for r in table}
@@ -676,8 +684,20 @@ def _format_table(table: Sequence[dict[str, Any]]) -> str:
     for r in table:
         cells = " ".join(f"{r[f'{k}_mean']:6.3f} ± {r[f'{k}_std']:5.3f}"
                          for k in ("score", "coverage", "precision", "progress"))  # fmt: skip
-        lines.append(f"{r['policy']:9s} {r['target']:17s} {cells} {r['normalized_score']:6.3f}")
+        lines.append(f"{r['policy']:9s} {r['target']:17s} {cells} {_normalised(r):>6s}")
+    if any(math.isnan(r["normalized_score"]) for r in table):
+        lines.append(NO_FLOOR)
     return "\n".join(lines)
+
+
+#: Why a table has no normalised score.
+NO_FLOOR = "n/a: the normalised score needs 'random' among --policies (its floor)"
+
+
+def _normalised(row: dict[str, Any]) -> str:
+    """The row's normalised score to 3 decimals, "n/a" without its floor (random)."""
+    x = row["normalized_score"]
+    return "n/a" if math.isnan(x) else f"{round(x, 6) + 0.0:.3f}"
 
 
 def _csv_list(text: str) -> list[str]:

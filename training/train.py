@@ -47,7 +47,7 @@ import numpy as np
 import yaml
 
 from cnt_env.io import to_jsonable
-from policies.residual import residual_settings
+from policies.residual import pin_base, residual_settings
 from policies.sb3 import model_files, save_vecnormalize, vecnormalize_path, write_manifest
 
 from .callbacks import make_task_metrics
@@ -159,6 +159,7 @@ def train(
         wrapper_class=wrapper,
         wrapper_kwargs=residual or None,
     )
+    score_mode = venv.get_attr("score_mode", [0])[0]
     norm = normalize_settings(config)
     if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
@@ -230,7 +231,8 @@ def train(
 
     _write_learning_curve(run)
     resolved = {
-        ENV_ID: to_jsonable(config),
+        # a residual agent's config pins its base's options (policies/residual.py)
+        ENV_ID: to_jsonable(pin_base(config, score_mode)),
         "run": {
             "algo": algo,
             "seed": seed,
