@@ -274,22 +274,36 @@ class SB3Policy:
     inference)."""
 
     def __init__(self, model, vecnormalize=None, name: str = "sb3", base=None,
-                 scale: float = 0.0) -> None:  # fmt: skip
+                 scale: float = 0.0, frame_stack: int = 1) -> None:  # fmt: skip
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
         #: residual agents (policies/residual.py): action = clip(base + scale * a)
         self.base = base
         self.scale = float(scale)
+        #: rl-zoo ``frame_stack``: the model sees the last n normalised observations,
+        #: newest last, zeros before the episode's first (SB3 VecFrameStack)
+        self.frame_stack = int(frame_stack)
+        self._stack: np.ndarray | None = None
 
     def reset(self, seed: int | None = None) -> None:
+        self._stack = None
         if self.base is not None:
             self.base.reset(seed)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        """The action for ``obs``; with ``frame_stack``, call :meth:`reset` at each
+        episode's start (the stack restarts there)."""
         o = np.asarray(obs, dtype=np.float32)[None]
         if self.vecnormalize is not None:
             o = self.vecnormalize.normalize_obs(o)
+        if self.frame_stack > 1:
+            d = o.shape[-1]
+            if self._stack is None:
+                self._stack = np.zeros((1, d * self.frame_stack), dtype=o.dtype)
+            self._stack = np.roll(self._stack, -d, axis=-1)
+            self._stack[:, -d:] = o
+            o = self._stack
         action, _ = self.model.predict(o, deterministic=True)
         a = np.asarray(action, dtype=np.float32).reshape(-1)
         if self.base is not None:
@@ -360,13 +374,14 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         vn = load_vecnormalize(vn_path)
     elif vn_path.is_file():  # only with trust (check_model)
         vn = _load_vecnormalize_pickle(vn_path)
-    base, scale = None, 0.0
+    base, scale, n_stack = None, 0.0, 1
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
         import yaml
 
         cfg = yaml.safe_load(cfg_path.read_text()) or {}
         entry = cfg.get("CNTDeposit-v0") or {}
+        n_stack = int(entry.get("frame_stack") or 1)
         residual = residual_settings(entry)
         if residual is not None:
             from cnt_env.task import CNTDepositEnv
@@ -390,7 +405,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
             base = make_base_policy(residual.get("base", "scripted"), env,
                                     residual.get("base_kwargs"))  # fmt: skip
             scale = float(residual.get("scale", 0.5))
-    return SB3Policy(model, vn, name=algo, base=base, scale=scale)
+    return SB3Policy(model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack)
 
 
 # ---- VecNormalize statistics as data ------------------------------------------------------

@@ -290,3 +290,44 @@ def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
     env.close()
     with pytest.raises(ValueError, match="unknown option"):
         base_options("scripted", "corridor", {"lookahaed": 10.0})
+
+
+def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) -> None:
+    """rl-zoo's ``frame_stack``: the model trains on SB3's VecFrameStack of normalised
+    observations, and the loaded policy rebuilds the same stack step by step (zeros
+    before the first observation, newest last), restarting at reset."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
+
+    from training.common import frame_stack, make_env
+    from training.train import train
+
+    model = train("ppo", {**_tiny_config(), "n_timesteps": 64, "frame_stack": 3},
+                  tmp_path / "stack", seed=0, progress_bar=False)  # fmt: skip
+    policy = load_policy(model)
+    assert policy.frame_stack == 3
+    assert policy.model.observation_space.shape == (3 * policy.vecnormalize.obs_rms.mean.size,)
+
+    venv = VecNormalize.load(str(model.with_name("ppo_vecnormalize.pkl")),
+                             DummyVecEnv([lambda: make_env(SMALL, 30)]))  # fmt: skip
+    venv.training, venv.norm_reward = False, False
+    venv = VecFrameStack(venv, 3)
+    for _episode in range(2):  # the stack restarts at reset
+        venv.seed(3)
+        stacked = venv.reset()
+        obs = venv.venv.get_original_obs()[0]
+        policy.reset(3)
+        for _ in range(4):
+            want, _ = policy.model.predict(stacked, deterministic=True)
+            got = policy.act(obs)
+            np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
+            stacked, *_ = venv.step(want)
+            obs = venv.venv.get_original_obs()[0]
+    venv.close()
+    assert [frame_stack({}), frame_stack({"frame_stack": 0}), frame_stack({"frame_stack": 4})] == [
+        1,
+        1,
+        4,
+    ]
+    for bad in (-1, 2.5, True, "4"):
+        with pytest.raises(ValueError, match="frame_stack"):
+            frame_stack({"frame_stack": bad})

@@ -41,7 +41,7 @@ CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 NON_ALGO_KEYS = frozenset({
     "n_timesteps", "policy", "n_envs", "normalize", "env_kwargs", "max_episode_steps",
     "eval_freq", "n_eval_episodes", "eval_targets", "save_freq", "vec_env", "residual",
-    "env_wrapper", "callback",
+    "env_wrapper", "callback", "frame_stack",
 })  # fmt: skip
 #: Registered episode cap (TimeLimit) when a config gives none: the env's own.
 DEFAULT_MAX_EPISODE_STEPS = 400
@@ -115,6 +115,18 @@ def normalize_settings(config: dict[str, Any]) -> dict[str, Any]:
         return {}
     extra = {} if value is True else policy_kwargs(value)
     return {"norm_obs": True, "norm_reward": True, **extra}
+
+
+def frame_stack(config: dict[str, Any]) -> int:
+    """rl-zoo's ``frame_stack``: the number of observations the agent sees, the newest
+    last (SB3 ``VecFrameStack`` over the normalised observation); 1 when absent, false
+    or 0 (no stack, as in rl-zoo)."""
+    n = config.get("frame_stack")
+    if n is None or n is False or (type(n) is int and n == 0):
+        return 1
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"frame_stack must be an integer >= 1, got {n!r}")
+    return n
 
 
 def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:

@@ -59,6 +59,7 @@ from .common import (
     algo_kwargs,
     env_settings,
     eval_settings,
+    frame_stack,
     fresh_dir,
     limit_threads,
     load_config,
@@ -136,7 +137,12 @@ def train(
     from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import (
+        DummyVecEnv,
+        SubprocVecEnv,
+        VecFrameStack,
+        VecNormalize,
+    )
 
     algo = algo.lower()
     cls = {"ppo": PPO, "sac": SAC}[algo]
@@ -163,6 +169,10 @@ def train(
     norm = normalize_settings(config)
     if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
+    normalizer = venv  # what is saved as the VecNormalize statistics
+    n_stack = frame_stack(config)
+    if n_stack > 1:  # rl-zoo's order: the stack of normalised observations
+        venv = VecFrameStack(venv, n_stack)
 
     tb = str(run / "tb") if _has_tensorboard() else None
     if tb is None:
@@ -193,6 +203,8 @@ def train(
         if norm:
             eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
                                     norm_obs=bool(norm["norm_obs"]))  # fmt: skip
+        if n_stack > 1:
+            eval_env = VecFrameStack(eval_env, n_stack)
         callbacks.append(
             EvalCallback(
                 eval_env,
@@ -224,8 +236,8 @@ def train(
     model.save(str(model_path))
     if norm:
         stem = vecnormalize_path(model_path)
-        venv.save(str(stem))  # VecNormalize's own format (pickle), for VecNormalize.load
-        save_vecnormalize(venv, stem)  # npz + JSON, what policies.load_policy reads
+        normalizer.save(str(stem))  # VecNormalize's own format (pickle), VecNormalize.load
+        save_vecnormalize(normalizer, stem)  # npz + JSON, what policies.load_policy reads
     venv.close()
     wall = time.perf_counter() - t_start
 
