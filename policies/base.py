@@ -15,7 +15,14 @@ import numpy as np
 
 from cnt_env.task.spaces import action_from_flow, flow_from_action
 
-__all__ = ["ConstantPolicy", "Policy", "RandomPolicy", "action_from_flow", "option_defaults"]
+__all__ = [
+    "ConstantPolicy",
+    "Policy",
+    "RandomPolicy",
+    "action_from_flow",
+    "option_defaults",
+    "policy_options",
+]
 
 
 def option_defaults(cls: type, exclude: tuple[str, ...]) -> dict[str, Any]:
@@ -24,6 +31,11 @@ def option_defaults(cls: type, exclude: tuple[str, ...]) -> dict[str, Any]:
     params = inspect.signature(cls.__init__).parameters.values()
     return {p.name: p.default for p in params
             if p.default is not p.empty and p.name not in exclude}  # fmt: skip
+
+
+def policy_options(policy: Any) -> dict[str, Any]:
+    """A policy's options (the keys of its class's ``OPTIONS``), as set."""
+    return {k: getattr(policy, k) for k in policy.OPTIONS}
 
 
 @runtime_checkable

@@ -141,10 +141,6 @@ class RouteFollower:
     def reset(self, seed: int | None = None) -> None:
         self._route = None
 
-    def options(self) -> dict:
-        """This follower's options (:data:`OPTIONS` keys), as set."""
-        return {k: getattr(self, k) for k in self.OPTIONS}
-
     def contact_on_route(self, o: np.ndarray, ahead: np.ndarray) -> np.ndarray | None:
         """The contact point in the route's frame, None without the route (no env).
 

@@ -268,6 +268,18 @@ def safe_custom_objects(model_path: str | Path, algo: str) -> dict[str, Any]:
 # ---- the policy ---------------------------------------------------------------------------
 
 
+def frame_stack(config: dict[str, Any]) -> int:
+    """rl-zoo's ``frame_stack``: the number of observations the agent sees, the newest
+    last (SB3 ``VecFrameStack`` over the normalised observation); 1 when absent, false
+    or 0 (no stack, as in rl-zoo)."""
+    n = config.get("frame_stack")
+    if n is None or n is False or (type(n) is int and n == 0):
+        return 1
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"frame_stack must be an integer >= 1, got {n!r}")
+    return n
+
+
 class SB3Policy:
     """A trained PPO/SAC model, deterministic, with its observation normalisation
     (``normalize_obs`` of :class:`NormalizerStats`; rewards are not normalised at
@@ -381,7 +393,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
 
         cfg = yaml.safe_load(cfg_path.read_text()) or {}
         entry = cfg.get("CNTDeposit-v0") or {}
-        n_stack = int(entry.get("frame_stack") or 1)
+        n_stack = frame_stack(entry)
         residual = residual_settings(entry)
         if residual is not None:
             from cnt_env.task import CNTDepositEnv

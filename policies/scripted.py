@@ -102,10 +102,6 @@ class ScriptedPolicy:
     def reset(self, seed: int | None = None) -> None:
         pass
 
-    def options(self) -> dict:
-        """This policy's options (:data:`OPTIONS` keys), as set."""
-        return {k: getattr(self, k) for k in self.OPTIONS}
-
     def speed_for(self, half_width: float) -> float:
         """v̄ whose measured amplitude is closest to ``half_width`` (L_vb)."""
         return float(np.interp(half_width, self._amp, self._vbar))

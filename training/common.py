@@ -117,18 +117,6 @@ def normalize_settings(config: dict[str, Any]) -> dict[str, Any]:
     return {"norm_obs": True, "norm_reward": True, **extra}
 
 
-def frame_stack(config: dict[str, Any]) -> int:
-    """rl-zoo's ``frame_stack``: the number of observations the agent sees, the newest
-    last (SB3 ``VecFrameStack`` over the normalised observation); 1 when absent, false
-    or 0 (no stack, as in rl-zoo)."""
-    n = config.get("frame_stack")
-    if n is None or n is False or (type(n) is int and n == 0):
-        return 1
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ValueError(f"frame_stack must be an integer >= 1, got {n!r}")
-    return n
-
-
 def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:
     """The algorithm's keyword arguments: ``lin_`` schedules and string
     ``policy_kwargs`` resolved (training/callbacks.py)."""

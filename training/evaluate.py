@@ -56,6 +56,7 @@ import yaml
 
 from cnt_env.task import routes
 from policies.residual import residual_settings
+from policies.sb3 import frame_stack
 
 from .common import (
     CONFIG_DIR,
@@ -64,7 +65,6 @@ from .common import (
     HeldOutCycle,
     env_settings,
     eval_settings,
-    frame_stack,
     fresh_dir,
     held_out_names,
     limit_threads,
@@ -368,8 +368,8 @@ def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]
     name = str(meta.get("algo", Path(run).name.rsplit("_s", 1)[0]))
     if residual_settings(cfg):
         name += "_residual"
-    if frame_stack(cfg) > 1:
-        name += f"_stack{frame_stack(cfg)}"
+    if (n_stack := frame_stack(cfg)) > 1:
+        name += f"_stack{n_stack}"
     label = f"{name} s{meta.get('seed', '?')}"
     if "timesteps_done" in meta and "wall_time_s" in meta:
         label += f" ({meta['timesteps_done']} steps, {meta['wall_time_s'] / 60:.0f} min)"

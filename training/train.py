@@ -48,7 +48,13 @@ import yaml
 
 from cnt_env.io import to_jsonable
 from policies.residual import pin_base, residual_settings
-from policies.sb3 import model_files, save_vecnormalize, vecnormalize_path, write_manifest
+from policies.sb3 import (
+    frame_stack,
+    model_files,
+    save_vecnormalize,
+    vecnormalize_path,
+    write_manifest,
+)
 
 from .callbacks import make_task_metrics
 from .common import (
@@ -59,7 +65,6 @@ from .common import (
     algo_kwargs,
     env_settings,
     eval_settings,
-    frame_stack,
     fresh_dir,
     limit_threads,
     load_config,
