@@ -37,15 +37,24 @@ def residual_settings(entry: dict) -> dict | None:
     return zoo_entry(entry.get("env_wrapper"), WRAPPER)
 
 
+def _zoo_list(entries: Any) -> list:
+    """An rl-zoo list (``env_wrapper``, ``callback``) as a list: a single entry may stand
+    alone, and an absent one is empty."""
+    return entries if isinstance(entries, list) else [entries] if entries else []
+
+
+def _names(entry: Any, name: str) -> bool:
+    """Whether an rl-zoo list entry (a name, or a one-key dict name -> kwargs) is ``name``."""
+    return entry == name or (isinstance(entry, dict) and name in entry)
+
+
 def zoo_entry(entries: Any, name: str) -> dict[str, Any] | None:
     """The kwargs of ``name`` in an rl-zoo list (``env_wrapper``, ``callback``): entries
     are a name, or a one-key dict name -> kwargs; a single entry may stand alone.
     None when ``name`` is absent."""
-    for e in entries if isinstance(entries, list) else [entries] if entries else []:
-        if e == name:
-            return {}
-        if isinstance(e, dict) and name in e:
-            return dict(e[name] or {})
+    for e in _zoo_list(entries):
+        if _names(e, name):
+            return dict(e[name] or {}) if isinstance(e, dict) else {}
     return None
 
 
@@ -66,11 +75,8 @@ def pin_base(entry: dict, score_mode: str) -> dict:
     if entry.get("residual"):
         out["residual"] = pinned
         return out
-    wrappers = entry["env_wrapper"]
-    wrappers = wrappers if isinstance(wrappers, list) else [wrappers]
     out["env_wrapper"] = [
-        {WRAPPER: pinned} if (w == WRAPPER or (isinstance(w, dict) and WRAPPER in w)) else w
-        for w in wrappers
+        {WRAPPER: pinned} if _names(w, WRAPPER) else w for w in _zoo_list(entry["env_wrapper"])
     ]
     return out
 

@@ -293,6 +293,28 @@ def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
         base_options("scripted", "corridor", {"lookahaed": 10.0})
 
 
+def test_zoo_lists_read_and_pin_in_every_rl_zoo_form() -> None:
+    """rl-zoo writes a wrapper as a bare name, a one-key dict, or a list of either; the
+    residual settings are read from, and pinned into, each form; other entries survive."""
+    from policies.residual import WRAPPER, pin_base, residual_settings, zoo_entry
+
+    other = {"gymnasium.wrappers.TimeAwareObservation": None}
+    kwargs = {"base": "scripted", "scale": 0.5}
+    forms = [(WRAPPER, {}), ({WRAPPER: kwargs}, kwargs), ([other, WRAPPER], {}),
+             ([other, {WRAPPER: kwargs}], kwargs)]  # fmt: skip
+    for wrappers, expected in forms:
+        entry = {"policy": "MlpPolicy", "env_wrapper": wrappers}
+        assert residual_settings(entry) == expected
+        pinned = pin_base(entry, "corridor")["env_wrapper"]
+        assert [w for w in pinned if w is not other] == [
+            {WRAPPER: {**expected, "base_kwargs": pinned[-1][WRAPPER]["base_kwargs"]}}
+        ]
+        assert pinned[-1][WRAPPER]["base_kwargs"]  # every option of the follower
+        assert (other in pinned) == isinstance(wrappers, list)
+    assert zoo_entry(None, WRAPPER) is None and zoo_entry([other], WRAPPER) is None
+    assert pin_base({"policy": "MlpPolicy"}, "corridor") == {"policy": "MlpPolicy"}
+
+
 def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) -> None:
     """rl-zoo's ``frame_stack``: the model trains on SB3's VecFrameStack of normalised
     observations, and the loaded policy rebuilds the same stack step by step (zeros
