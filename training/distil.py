@@ -171,7 +171,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from policies.residual import pin_base
+    from policies.residual import WRAPPER, pin_base
     from policies.sb3 import save_vecnormalize, vecnormalize_path, write_manifest
 
     from .common import ENV_ID, ResidualAction, algo_kwargs, limit_threads, load_config, make_env
@@ -253,8 +253,7 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: 
     save_vecnormalize(venv, vecnormalize_path(path))
     entry = dict(config)
     entry["env_kwargs"] = {**entry.get("env_kwargs", {}), "difficulty": difficulty}
-    entry["env_wrapper"] = [{"training.common.ResidualAction": {"base": "scripted",
-                                                                "scale": scale}}]  # fmt: skip
+    entry["env_wrapper"] = [{WRAPPER: {"base": "scripted", "scale": scale}}]
     entry = pin_base(entry, venv.get_attr("score_mode", [0])[0])
     summaries = [e["summary"] for e in eps]
     entry["distil"] = {"scale": scale, "margin": margin, "epochs": epochs, "seed": seed,
