@@ -1,6 +1,11 @@
 """Residual actions (Silver et al. 2018; Johannink et al. 2019): the agent's action ``a``
 corrects a base policy's, and the env receives ``clip(base(obs) + scale * a, -1, 1)``.
 
+With ``observe_base`` the agent also sees the base's action: its observation is the env's
+followed by ``base(obs)`` (:func:`observe`). The route follower acts on a memory of the
+band (its last control steps and its one-step lead) that the env's observation does not
+hold, so without it the agent cannot tell what it is correcting.
+
 The one implementation, used by the training wrapper (``training/common.py``
 ``ResidualAction``) and by trained residual agents at inference (``policies/sb3.py``).
 """
@@ -17,6 +22,8 @@ __all__ = [
     "base_options",
     "combine",
     "make_base_policy",
+    "observe",
+    "observed_space",
     "pin_base",
     "residual_settings",
     "zoo_entry",
@@ -85,6 +92,26 @@ def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.n
     """clip(base + scale * residual, -1, 1) as float32."""
     a = np.asarray(base_action, dtype=np.float64) + scale * np.asarray(residual, dtype=np.float64)
     return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+
+def observe(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:
+    """The observation of a residual agent with ``observe_base``: the env's observation
+    followed by the base's action for it, as float32."""
+    return np.concatenate([np.asarray(obs, dtype=np.float32).reshape(-1),
+                           np.asarray(base_action, dtype=np.float32).reshape(-1)])  # fmt: skip
+
+
+def observed_space(observation_space, action_space):
+    """The observation space of :func:`observe`: the env's (a flat Box) followed by the
+    action space's bounds."""
+    from gymnasium import spaces
+
+    if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
+        raise ValueError("observe_base needs a flat Box observation (the vector observation "
+                         f"of CNTDeposit-v0), got {observation_space}")  # fmt: skip
+    low = np.concatenate([observation_space.low, action_space.low]).astype(np.float32)
+    high = np.concatenate([observation_space.high, action_space.high]).astype(np.float32)
+    return spaces.Box(low, high, dtype=np.float32)
 
 
 def _base_class(name: str, score_mode: str):

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .residual import combine, make_base_policy, residual_settings
+from .residual import combine, make_base_policy, observe, residual_settings
 
 __all__ = [
     "ALGOS",
@@ -286,13 +286,16 @@ class SB3Policy:
     inference)."""
 
     def __init__(self, model, vecnormalize=None, name: str = "sb3", base=None,
-                 scale: float = 0.0, frame_stack: int = 1) -> None:  # fmt: skip
+                 scale: float = 0.0, frame_stack: int = 1,
+                 observe_base: bool = False) -> None:  # fmt: skip
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
         #: residual agents (policies/residual.py): action = clip(base + scale * a)
         self.base = base
         self.scale = float(scale)
+        #: the agent also sees the base's action (policies/residual.py ``observe``)
+        self.observe_base = bool(observe_base)
         #: rl-zoo ``frame_stack``: the model sees the last n normalised observations,
         #: newest last, zeros before the episode's first (SB3 VecFrameStack)
         self.frame_stack = int(frame_stack)
@@ -306,7 +309,8 @@ class SB3Policy:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """The action for ``obs``; with ``frame_stack``, call :meth:`reset` at each
         episode's start (the stack restarts there)."""
-        o = np.asarray(obs, dtype=np.float32)[None]
+        b = self.base.act(obs) if self.base is not None else None
+        o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)[None]
         if self.vecnormalize is not None:
             o = self.vecnormalize.normalize_obs(o)
         if self.frame_stack > 1:
@@ -318,8 +322,8 @@ class SB3Policy:
             o = self._stack
         action, _ = self.model.predict(o, deterministic=True)
         a = np.asarray(action, dtype=np.float32).reshape(-1)
-        if self.base is not None:
-            return combine(self.base.act(obs), a, self.scale)
+        if b is not None:
+            return combine(b, a, self.scale)
         return a
 
 
@@ -386,7 +390,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         vn = load_vecnormalize(vn_path)
     elif vn_path.is_file():  # only with trust (check_model)
         vn = _load_vecnormalize_pickle(vn_path)
-    base, scale, n_stack = None, 0.0, 1
+    base, scale, n_stack, observe_base = None, 0.0, 1, False
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
         import yaml
@@ -417,7 +421,10 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
             base = make_base_policy(residual.get("base", "scripted"), env,
                                     residual.get("base_kwargs"))  # fmt: skip
             scale = float(residual.get("scale", 0.5))
-    return SB3Policy(model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack)
+            observe_base = bool(residual.get("observe_base", False))
+    return SB3Policy(
+        model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack, observe_base=observe_base
+    )
 
 
 # ---- VecNormalize statistics as data ------------------------------------------------------

@@ -355,3 +355,55 @@ def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) 
     for bad in (-1, 2.5, True, "4"):
         with pytest.raises(ValueError, match="frame_stack"):
             frame_stack({"frame_stack": bad})
+
+
+def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_inference(
+    tmp_path: Path,
+) -> None:
+    """With observe_base the training wrapper shows the agent the env's observation
+    followed by the follower's action, and the loaded policy rebuilds that observation:
+    the wrapper driven by the model's own predictions and the loaded policy lay the same
+    trajectory, bit for bit."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    from policies.residual import make_base_policy
+    from policies.sb3 import load_vecnormalize, vecnormalize_path
+    from training.common import ResidualAction, make_env
+    from training.train import train
+
+    kwargs = {"base": "scripted", "scale": 1.0, "observe_base": True}
+    config = {**_tiny_config(), "n_timesteps": 64,
+              "env_wrapper": [{"training.common.ResidualAction": kwargs}]}  # fmt: skip
+    model_path = train("ppo", config, tmp_path / "resid", seed=0, progress_bar=False)
+
+    wrapped = ResidualAction(make_env(SMALL, 30), **kwargs)
+    inner = wrapped.env.observation_space.shape[0]
+    assert wrapped.observation_space.shape == (inner + 2,)
+    obs, _ = wrapped.reset(seed=3)
+    fresh = make_env(SMALL, 30)
+    follower = make_base_policy("scripted", fresh)
+    raw0, _ = fresh.reset(seed=3)
+    follower.reset(3)
+    np.testing.assert_array_equal(obs[:inner], raw0)
+    np.testing.assert_array_equal(obs[inner:], follower.act(raw0))  # the base's action
+    fresh.close()
+    model = PPO.load(str(model_path), device="cpu")
+    vn = load_vecnormalize(vecnormalize_path(model_path))
+    via_wrapper = [obs[:inner]]
+    for _ in range(6):
+        a, _ = model.predict(vn.normalize_obs(obs[None]), deterministic=True)
+        obs, *_ = wrapped.step(a.reshape(-1))
+        via_wrapper.append(obs[:inner])
+
+    env = gym.make("CNTDeposit-v0", **SMALL)
+    policy = load_policy(model_path, env=env)
+    assert policy.observe_base
+    raw, _ = env.reset(seed=3)
+    policy.reset(3)
+    via_policy = [raw]
+    for _ in range(6):
+        raw, *_ = env.step(policy.act(raw))
+        via_policy.append(raw)
+    env.close()
+    np.testing.assert_array_equal(np.array(via_wrapper), np.array(via_policy))

@@ -14,7 +14,7 @@ import yaml
 
 from cnt_env.task import routes
 from cnt_env.task import targets as targets_mod
-from policies.residual import combine, make_base_policy, zoo_entry
+from policies.residual import combine, make_base_policy, observe, observed_space, zoo_entry
 
 __all__ = [
     "CONFIG_DIR",
@@ -162,26 +162,34 @@ class ResidualAction(gym.Wrapper):
 
     The wrapper sits below VecNormalize: the base sees the raw observation.
     ``base_kwargs`` are the base's options (policies/residual.py ``base_options``; its
-    defaults when omitted); the trained model's config pins them."""
+    defaults when omitted); the trained model's config pins them. ``observe_base``
+    appends the base's action to the observation (policies/residual.py ``observe``)."""
 
     def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5,
-                 base_kwargs: dict[str, Any] | None = None) -> None:  # fmt: skip
+                 base_kwargs: dict[str, Any] | None = None,
+                 observe_base: bool = False) -> None:  # fmt: skip
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
         self.base = make_base_policy(base, env, base_kwargs)
-        self._obs: np.ndarray | None = None
+        self.observe_base = bool(observe_base)
+        if self.observe_base:
+            self.observation_space = observed_space(env.observation_space, env.action_space)
+        self._base_action: np.ndarray | None = None
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        """The base acts on ``obs`` now (its action is played at the next step)."""
+        self._base_action = self.base.act(obs)
+        return observe(obs, self._base_action) if self.observe_base else obs
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self.base.reset(seed)
-        self._obs = obs
-        return obs, info
+        return self._observe(obs), info
 
     def step(self, action):
-        a = combine(self.base.act(self._obs), action, self.scale)
+        a = combine(self._base_action, action, self.scale)
         obs, reward, terminated, truncated, info = self.env.step(a)
-        self._obs = obs
-        return obs, reward, terminated, truncated, info
+        return self._observe(obs), reward, terminated, truncated, info
 
 
 #: An eval target that stands for a route drawn from the training families (a validation
