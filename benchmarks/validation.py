@@ -50,6 +50,12 @@ def _suite_defaults() -> dict[str, dict]:
     return out
 
 
+#: the mesh sequence of the delta study (RESULTS.md, issue 12, "The delta study")
+DELTA_STUDY = (1.0, 0.5, 0.25, 0.2)
+#: the off-baseline points of the issue-12 configuration study
+TREND_POINTS = (("vbar", 0.019), ("vbar", 0.07), ("vbar", 0.12), ("phi", 0.87), ("phi", 1.2),
+                ("kappa_c_bar", 0.1))  # fmt: skip
+
 SERPENTINE_CASES: dict[str, dict] = {
     "default": {},
     "sliding_C": {"sliding": "C"},
@@ -75,6 +81,17 @@ SERPENTINE_CASES: dict[str, dict] = {
         for v in (0.019, 0.12)
         for t in (100.0, 300.0)
     },
+    # the delta study of the linear law (sliding C), whose coil converges to the paper's
+    # R0 as delta falls (COIL_CASES): can one fine delta serve both substrates?
+    **{f"linear_delta_{d:g}": {"drag_law": "linear", "delta_bar": d} for d in DELTA_STUDY},
+    # ... and the shipped (printed) law on the same sequence (delta_half is its 0.5)
+    **{f"delta_{d:g}": {"delta_bar": d} for d in (0.25, 0.2)},
+    # the trend points of the issue-12 study for the linear law at delta 1 and 0.2
+    **{
+        f"linear_delta_{d:g}_{k}_{v:g}": {"drag_law": "linear", "delta_bar": d, k: v}
+        for d in (1.0, 0.2)
+        for k, v in TREND_POINTS
+    },
 }
 
 # name -> overrides of the coil suite's defaults (_suite_defaults)
@@ -90,6 +107,10 @@ COIL_CASES: dict[str, dict] = {
     "printed_drag": {"drag_law": "printed"},
     "printed_drag_delta_1": {"drag_law": "printed", "delta_bar": 1.0, "coarse_delta": None},
     "uniform_0.25": {"delta_bar": 0.25, "coarse_delta": None},
+    # the linear law on the serpentine's mesh sequence (SERPENTINE_CASES linear_delta_*),
+    # and the shipped (printed) law at its finest point
+    **{f"linear_delta_{d:g}": {"drag_law": "linear", "delta_bar": d} for d in DELTA_STUDY},
+    "delta_0.2": {"delta_bar": 0.2},
 }
 
 
@@ -160,14 +181,26 @@ def _row(suite: str, name: str, r: dict, ref: dict | None) -> str:
     return (common + f"| {r['sliding']} | {r['kappa_c_bar']} | {vbar} | {r['phi']} "
             f"| {r['pattern']} "
             f"| {r['amplitude']:.2f} ({rel_a}) | {r['wavelength']:.2f} ({rel_w}) "
-            f"| {r['n_cycles']} | {r['n_loops']} " + tail)  # fmt: skip
+            f"| {r['n_cycles']} | {r['n_loops']} | {_drift_ratio(r)} " + tail)  # fmt: skip
+
+
+def _drift_ratio(r: dict) -> str:
+    """lambda V / (4 A vbar) of a serpentine across the steps (phi = 0): one cycle lays
+    ~4 A of trace in 4 A / V while the pattern drifts with the flow, so lambda ~ 4 A vbar
+    / V and the ratio is ~1 (RESULTS.md, issue 12, "The delta study"); "-" otherwise."""
+    from cnt_env.units import paper_groups
+
+    if r["phi"] != 0.0 or not r["amplitude"] > 0:
+        return "-"
+    vbar = r.get("vbar") or paper_groups("serpentine").vbar
+    return f"{r['wavelength'] * r['V_Hbar'] / (4.0 * r['amplitude'] * vbar):.2f}"
 
 
 CASES = {"coil": COIL_CASES, "serpentine": SERPENTINE_CASES}
 HEADERS = {
     "coil": "| case | delta | dt_factor | R_i | drag | R0 | vs 7.64 | vs default |",
     "serpentine": "| case | delta | dt_factor | sliding | kappa_c | vbar | phi | pattern "
-    "| amplitude | wavelength | cycles | loops |",
+    "| amplitude | wavelength | cycles | loops | lambda V / (4 A vbar) |",
 }
 
 

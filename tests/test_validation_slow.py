@@ -44,6 +44,24 @@ def test_serpentine_baseline_keeps_its_recorded_figures(serpentine_baseline: dic
     assert m["wavelength"] == pytest.approx(8.77, rel=0.01)
 
 
+def test_serpentine_wavelength_is_the_drift_of_one_cycle() -> None:
+    """Kinematics of a serpentine across the steps: one cycle lays ~4 A of trace in
+    4 A / V while the pattern drifts with the flow, so lambda = 4 A vbar / V (V: the
+    deposition speed after the transient, times Hbar). Over 24 runs (both drag laws, delta
+    0.2-1, vbar 0.019-0.12, kappa_c 0.1-0.2) the ratio is 1.03 +- 0.05, 0.96-1.13
+    (benchmarks/validation.py serpentine, RESULTS.md issue 12, "The delta study"): the
+    wavelength is set by the amplitude and the deposition speed."""
+    sim = DepositionSim(default_config("serpentine"), seed=0)
+    sim.run(150.0)
+    mid = sim.stats()
+    sim.run(1350.0)
+    end = sim.stats()
+    m = measure(sim.trace(), MeasureOptions(transient_length=150.0), substrate="stepped")
+    v_dep = (end["deposited_length"] - mid["deposited_length"]) / (end["time"] - mid["time"])
+    ratio = m["wavelength"] * v_dep * sim.params.Hbar / (4.0 * m["amplitude"] * sim.params.vbar)
+    assert ratio == pytest.approx(1.0, abs=0.1)
+
+
 @pytest.mark.xfail(strict=True, reason="the shipped model's baseline amplitude is 41.3, "
                    "over the paper's 26-33 (benchmarks/RESULTS.md, issue 12)")  # fmt: skip
 def test_serpentine_baseline_amplitude_and_wavelength(serpentine_baseline: dict) -> None:
