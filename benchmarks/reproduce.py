@@ -270,7 +270,7 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
     from cnt_env.sim.deposition import ContactOptions, default_config
 
     changes = dict(CANDIDATES[candidate])
-    if point["preset"] == COIL:  # the candidates are stepped-substrate options
+    if point["preset"] == COIL:  # stepped-substrate options but the drag law, contact, delta
         keep = ("drag_law", "contact_mode", "delta_bar")
         changes = {k: v for k, v in changes.items() if k in keep}
     mode = changes.pop("contact_mode", None)
