@@ -115,7 +115,6 @@ COIL_CASES: dict[str, dict] = {
 
 
 def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
-    import math
 
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.sim.deposition import DepositionConfig, DepositionSim
@@ -146,9 +145,10 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     st = sim.stats()
     laid = st["deposited_length"] - mid["deposited_length"]
     substrate = "stepped" if suite == "serpentine" else "flat"
-    phi = c.get("phi", 0.0)
+    # the wavelength along x, the paper's frame (as reproduce.py); until round 4 this
+    # measured it along the flow, which differs at phi != 0
     m = measure(sim.trace(), MeasureOptions(transient_length=transient), substrate,
-                flow_direction=(math.cos(phi), math.sin(phi)))  # fmt: skip
+                flow_direction=(1.0, 0.0))  # fmt: skip
     keep = ("pattern", "coil_radius", "coil_radius_spread", "coil_coverage", "amplitude",
             "amplitude_spread", "amplitude_cv", "peak_to_peak", "wavelength",
             "wavelength_spread", "wavelength_cv", "n_uturns", "n_cycles", "n_loops",
