@@ -50,15 +50,13 @@ def _episode(job: tuple[str, str, int, str]) -> tuple[str, int, float]:
 
 
 def _heldout(results: Path) -> dict[str, float]:
-    """Mean held-out score per policy of a cnt-evaluate results directory."""
-    out: dict[str, list[float]] = {}
-    for r in json.loads((results / "episodes.json").read_text()):
-        out.setdefault(r["policy"], []).append(float(r["score"]))
-    return {k: float(np.mean(v)) for k, v in out.items()}
+    """Mean held-out score per policy, from a cnt-evaluate results directory's summary."""
+    policies = json.loads((results / "summary.json").read_text())["policies"]
+    return {k: float(v["score_mean"]) for k, v in policies.items()}
 
 
 def main(argv: list[str] | None = None) -> None:
-    from training.common import CONFIG_DIR
+    from training.common import CONFIG_DIR, VALIDATION_SEED0
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--models", required=True)
@@ -79,7 +77,8 @@ def main(argv: list[str] | None = None) -> None:
     wall = time.perf_counter() - t0
     held = _heldout(Path(args.heldout)) if args.heldout else {}
     val = {n: float(np.mean(v)) for n, v in scores.items()}
-    print(f"{args.routes} validation routes (reset seeds 50000-{50000 + args.routes - 1}), "
+    last = VALIDATION_SEED0 + args.routes - 1
+    print(f"{args.routes} validation routes (reset seeds {VALIDATION_SEED0}-{last}), "
           f"{len(jobs)} episodes in {wall:.0f} s")  # fmt: skip
     print("| model | validation mean | held-out mean |")
     print("|---|---|---|")

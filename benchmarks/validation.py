@@ -115,7 +115,6 @@ COIL_CASES: dict[str, dict] = {
 
 
 def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
-
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.sim.deposition import DepositionConfig, DepositionSim
     from cnt_env.sim.stepper import NewtonOptions
