@@ -407,3 +407,27 @@ def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_i
         via_policy.append(raw)
     env.close()
     np.testing.assert_array_equal(np.array(via_wrapper), np.array(via_policy))
+
+
+def test_every_shipped_config_makes_its_env_and_eval_converged_swaps_the_physics() -> None:
+    """Each YAML in training/configs names env keywords the env accepts; the
+    converged-model evaluation config (training/configs/eval_converged.yml) runs the
+    linear drag law on a rod of delta_bar 0.2 where the training configs keep the
+    env's default physics."""
+    from cnt_env.presets import MODEL
+    from training.common import env_settings, load_config, make_env
+
+    configs = sorted((Path(__file__).resolve().parents[1] / "training" / "configs").glob("*.yml"))
+    assert any(p.name == "eval_converged.yml" for p in configs)
+    for path in configs:
+        env_kwargs, steps = env_settings(load_config(path))
+        env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
+        try:
+            base = env.unwrapped
+            if path.name == "eval_converged.yml":
+                assert (base.config.drag_law, base.params.delta_bar) == ("linear", 0.2)
+            else:
+                assert base.config.drag_law == MODEL["drag_law"]
+                assert base.params.delta_bar == 1.0
+        finally:
+            env.close()
