@@ -21,6 +21,7 @@ The env is run at its default physics with a target it never reaches, one contro
 Writes ``benchmarks/results/step_response.json`` (``--out``) and prints it.
 
     python benchmarks/step_response.py [--hold 150] [--vbar 0.13] [--speeds 0.065,0.1,0.13]
+        [--env-kwargs JSON] [--out FILE]
 """
 
 from __future__ import annotations
@@ -160,10 +161,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--width-steps", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=OUT)
+    p.add_argument("--env-kwargs", type=json.loads, default={},
+                   help='JSON env keywords on top of the defaults, e.g. \'{"drag_law": '
+                        '"linear", "delta_bar": 0.2}\' (the mesh-converged model)')  # fmt: skip
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     # the thin task: control steps of ~1 L_vb (1.5 H̄), finer than any choice measured here
-    env = CNTDepositEnv(score="thin", pattern_every=0)
+    env = CNTDepositEnv(**{"score": "thin", "pattern_every": 0, **args.env_kwargs})
     flows = [(args.vbar, phi) for phi in PHIS]
     steps = analyse(run(env, flows, args.hold, args.seed), flows, args.hold)
     widths = []
@@ -179,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
             "n_substeps": env.n_substeps,
             "Hbar": env.params.Hbar,
             "preset": "serpentine",
+            "kwargs": args.env_kwargs,
         },
         "method": {
             "centre_window": CENTRE_WINDOW,
