@@ -24,7 +24,11 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from cnt_env.presets import ENV_MESH, ENV_SIM_DEFAULTS
+
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
+#: the env's speed settings on the stepped substrate (step, solved tail, graded rod)
+ENV_STEPPED = {**ENV_SIM_DEFAULTS["stepped"], **ENV_MESH}
 
 
 def _suite_defaults() -> dict[str, dict]:
@@ -91,6 +95,17 @@ SERPENTINE_CASES: dict[str, dict] = {
         f"linear_delta_{d:g}_{k}_{v:g}": {"drag_law": "linear", "delta_bar": d, k: v}
         for d in (1.0, 0.2)
         for k, v in TREND_POINTS
+    },
+    # the env's speed settings on the shipped model and on the linear law at delta 0.2
+    # (what the env runs with training/configs/eval_converged.yml), at the baseline and
+    # v = 0.12: what the speed settings cost each model
+    **{
+        f"{name}env{suffix}": {**model, **ENV_STEPPED, **point}
+        for name, model in (
+            ("", {}),
+            ("linear_delta_0.2_", {"drag_law": "linear", "delta_bar": 0.2}),
+        )
+        for suffix, point in (("", {}), ("_vbar_0.12", {"vbar": 0.12}))
     },
 }
 
