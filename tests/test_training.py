@@ -415,6 +415,7 @@ def test_every_shipped_config_makes_its_env_and_eval_converged_swaps_the_physics
     linear drag law on a rod of delta_bar 0.2 where the training configs keep the
     env's default physics."""
     from cnt_env.presets import MODEL
+    from cnt_env.units import DEFAULT_DELTA_BAR
     from training.common import env_settings, load_config, make_env
 
     configs = sorted((Path(__file__).resolve().parents[1] / "training" / "configs").glob("*.yml"))
@@ -428,6 +429,6 @@ def test_every_shipped_config_makes_its_env_and_eval_converged_swaps_the_physics
                 assert (base.config.drag_law, base.params.delta_bar) == ("linear", 0.2)
             else:
                 assert base.config.drag_law == MODEL["drag_law"]
-                assert base.params.delta_bar == 1.0
+                assert base.params.delta_bar == DEFAULT_DELTA_BAR
         finally:
             env.close()
