@@ -7,11 +7,13 @@ Prints JSON: wall time (numba compilation excluded), steps, mean Newton iteratio
 step, deposited length per wall-second, and the measured pattern figures.
 
     python benchmarks/baseline_speed.py [--preset coil|serpentine] [--deposit L]
-                                        [--delta D] [--coarse-delta C] [--previous]
+                                        [--delta D] [--coarse-delta C] [--surrogate]
+                                        [--previous]
                                         [--out FILE.json]
 
-Without options it runs the preset's validated configuration (presets.MESH: delta = 1,
-graded above 20 L_vb from the contact; presets.NEWTON: residual 1e-5 e_v);
+Without options it runs the preset's validated configuration (presets.MODEL on
+presets.MESH: delta = 0.2, graded above 20 L_vb from the contact; presets.NEWTON:
+residual 1e-5 e_v); ``--surrogate`` the fast surrogate (the printed law at delta = 1);
 ``--coarse-delta 0`` is a uniform rod. ``--previous`` also runs the defaults before
 round 3 (uniform rod, residual 1e-8) in the same process, after the current ones, and
 prints the ratio of their wall times; ``--out`` writes the JSON to a file as well.
@@ -25,6 +27,7 @@ import time
 from pathlib import Path
 
 from cnt_env.patterns import MeasureOptions, measure
+from cnt_env.presets import SURROGATE
 from cnt_env.sim.deposition import DepositionSim, default_config
 from cnt_env.sim.stepper import NewtonOptions
 
@@ -66,12 +69,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--deposit", type=float, default=None, help="coil 1000, serp. 500")
     parser.add_argument("--delta", type=float, default=None, help="fine delta_bar")
     parser.add_argument("--coarse-delta", type=float, default=None, help="0: uniform")
+    parser.add_argument("--surrogate", action="store_true",
+                        help="the fast surrogate (presets.SURROGATE)")  # fmt: skip
     parser.add_argument("--transient", type=float, default=150.0)
     parser.add_argument("--previous", action="store_true",
                         help="also run the pre-round-3 defaults (uniform, 1e-8)")  # fmt: skip
     parser.add_argument("--out", default=None, help="also write the JSON here")
     args = parser.parse_args(argv)
-    overrides = {} if args.delta is None else {"delta_bar": args.delta}
+    overrides = dict(SURROGATE) if args.surrogate else {}
+    if args.delta is not None:
+        overrides["delta_bar"] = args.delta
     if args.coarse_delta is not None:
         overrides["coarse_delta"] = args.coarse_delta or None
     deposit = args.deposit or {"coil": 1000.0, "serpentine": 500.0}[args.preset]

@@ -19,13 +19,17 @@ round 3 (a uniform suspended rod and the Newton tolerance 1e-8: ``sim_options=
 {"coarse_delta": None, "newton": NewtonOptions()}``, against the graded rod and 1e-5 of
 ``presets.MESH`` and ``presets.NEWTON``; on the coil preset also the validated step,
 ``dt_factor`` 0.05, against the flat env's 0.1 of ``presets.ENV_SIM_DEFAULTS``) and the
-ratio of the two figures of merit. ``--baseline N``
+ratio of the two figures of merit. ``--surrogate`` adds the same for the fast surrogate
+the agents are trained on (``presets.SURROGATE``: the printed drag law at delta_bar 1,
+against the model's linear law at 0.2) and the ratio of the surrogate's figure to the
+default's. ``--baseline N``
 also runs N control steps of the paper's constant flow (v̄ = 0.037 along +x) and
 measures the serpentine it lays, which sets the episode length (max_episode_steps).
 Prints one JSON object.
 
     python benchmarks/env_throughput.py [--steps 200] [--presets serpentine,coil]
-                                        [--previous] [--small] [--baseline 600]
+                                        [--previous] [--surrogate] [--small]
+                                        [--baseline 600]
                                         [--score corridor|thin] [--out FILE]
 """
 
@@ -49,6 +53,7 @@ import numpy as np  # noqa: E402
 
 from cnt_env.patterns import MeasureOptions  # noqa: E402
 from cnt_env.patterns import measure as measure_pattern  # noqa: E402
+from cnt_env.presets import SURROGATE  # noqa: E402
 from cnt_env.sim import warmstart  # noqa: E402
 from cnt_env.sim.deposition import DepositionConfig, DepositionSim  # noqa: E402
 from cnt_env.sim.stepper import NewtonOptions  # noqa: E402
@@ -183,6 +188,11 @@ def main(argv: list[str] | None = None) -> None:
         help="also measure each preset with the settings before round 3 (uniform rod, 1e-8)",
     )
     parser.add_argument(
+        "--surrogate",
+        action="store_true",
+        help="also measure each preset on the fast surrogate (presets.SURROGATE)",
+    )
+    parser.add_argument(
         "--small",
         action="store_true",
         help="the test-suite configuration (Hbar = 30) instead of the default",
@@ -222,6 +232,12 @@ def main(argv: list[str] | None = None) -> None:
             result[preset]["previous"] = prev
             result[preset]["ratio_to_previous"] = round(
                 result[preset]["lvb_per_cpu_s"] / prev["lvb_per_cpu_s"], 3
+            )
+        if args.surrogate:
+            fast = measure(dict(base, preset=preset, **SURROGATE), args.steps)
+            result[preset]["surrogate"] = fast
+            result[preset]["surrogate_speedup"] = round(
+                fast["lvb_per_cpu_s"] / result[preset]["lvb_per_cpu_s"], 3
             )
     if args.baseline > 0:
         with tempfile.TemporaryDirectory() as cache:

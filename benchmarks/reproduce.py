@@ -173,14 +173,15 @@ def _point(row: str, preset: str, run: tuple[float, float] | None = None,
     return point
 
 
-#: L_vb each serpentine point deposits (the preset's ``RUN_DEPOSIT`` since round 3's last
-#: session): the pattern classes need >= 10 cycles to call a serpentine periodic
-#: (patterns.MeasureOptions.periodic_min_cycles), and at the earlier 1500 L_vb the
-#: baseline lays 7 (a cycle is ~4A + lambda of trace: ~170 L_vb at A = 41) and v̄ = 0.019
-#: only 5, so most points came out "too_short". 4000 gives ~2.9x the measured cycles;
-#: ``--serpentine-run 1500`` is the earlier length (the Δt and seed studies of
-#: benchmarks/results/reproduce_1500 ran at it).
-SERPENTINE_RUN = 4000.0
+#: L_vb each serpentine point deposits (the preset's ``RUN_DEPOSIT``): the pattern classes
+#: need >= 10 cycles to call a serpentine periodic
+#: (patterns.MeasureOptions.periodic_min_cycles), and at 1500 L_vb the model's baseline
+#: lays 9 (a cycle is ~4A + lambda of trace: ~150 L_vb at A = 34) and v̄ = 0.019 only 6,
+#: so most points came out "too_short". The surrogate's table
+#: (benchmarks/results/reproduce_surrogate) ran at 4000; ``--serpentine-run 1500`` is the
+#: earlier length (the Δt and seed studies of benchmarks/results/reproduce_1500 and
+#: C_fine's table, benchmarks/results/reproduce_C_fine, ran at it).
+SERPENTINE_RUN = 3000.0
 #: (deposit, transient) of the serpentine preset's run when the 1500 L_vb table
 #: (benchmarks/results/reproduce_1500) ran: its point keys name no run, and a point at this
 #: run still gets those keys.
@@ -282,12 +283,34 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
     return default_config(point["preset"], **changes)
 
 
+#: The model of the "default" candidate from issue 12's study until the default became
+#: the mesh-converged model (round 4's last session): the printed drag law at delta_bar 1
+#: (candidate printed_C). Records of "default" made then name no model fields in their
+#: keys; a default that differs from it names the fields that differ.
+LEGACY_DEFAULT_MODEL: dict[str, Any] = {
+    "drag_law": "printed", "delta_bar": 1.0, "sliding": "C", "snap": "jump",
+    "friction": 0.0, "tail_clamp": "xyz", "tail_length": 195.0,
+}  # fmt: skip
+
+
+def _default_model_fields(cfg: Any) -> str:
+    """``|k=v`` for each field of LEGACY_DEFAULT_MODEL on which ``cfg`` differs."""
+    now = {k: getattr(cfg, k) for k in LEGACY_DEFAULT_MODEL if k != "delta_bar"}
+    now["delta_bar"] = cfg.params.delta_bar
+    return "".join(
+        f"|{k}={v:g}" if isinstance(v, float) else f"|{k}={v}"
+        for k, v in now.items()
+        if v != LEGACY_DEFAULT_MODEL[k]
+    )
+
+
 def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
               seed: int = 0) -> str:  # fmt: skip
     """The point's name in results.jsonl; it names the mesh, Newton tolerance, length
     projection, edge-rotation check and lagged Jacobian it ran with, so a change of any
     of these defaults runs the point again, and a seed other than 0 (the seeded start-up
-    perturbation)."""
+    perturbation). The named candidates fix their model; "default" follows presets.py, so
+    its key also names the model fields that differ from LEGACY_DEFAULT_MODEL."""
     g = ",".join(f"{k}={v:g}" for k, v in sorted(point["groups"].items()))
     if "run" in point and not (
         point["preset"] == SERP and tuple(point["run"]) == LEGACY_SERPENTINE_RUN
@@ -302,7 +325,11 @@ def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
     rot = cfg.newton.max_edge_rotation  # named when on (records before it ran without)
     pj += f",rot={math.degrees(rot):g}" if rot else ""
     pj += ",lag" if cfg.newton.lagged_jacobian else ""  # named when on, as above
-    return f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}{pj}"
+    model = _default_model_fields(cfg) if candidate == "default" else ""
+    return (
+        f"{candidate}|{point['preset']}|{g}{dt}{sd}|{mesh},tol={cfg.newton.residual_tol:g}"
+        f"{pj}{model}"
+    )
 
 
 def run_point(

@@ -63,7 +63,8 @@ TREND_POINTS = (("vbar", 0.019), ("vbar", 0.07), ("vbar", 0.12), ("phi", 0.87), 
 SERPENTINE_CASES: dict[str, dict] = {
     "default": {},
     "sliding_C": {"sliding": "C"},
-    "delta_half": {"delta_bar": 0.5},
+    # the printed law (the default until round 4's end, now the surrogate) at delta 0.5
+    "delta_half": {"drag_law": "printed", "delta_bar": 0.5},
     "dt_half": {"dt_factor": 0.025},
     # dt convergence at the ends of the flow range, where the contact moves fastest
     "vbar_0.019": {"vbar": 0.019},
@@ -88,21 +89,21 @@ SERPENTINE_CASES: dict[str, dict] = {
     # the delta study of the linear law (sliding C), whose coil converges to the paper's
     # R0 as delta falls (COIL_CASES): can one fine delta serve both substrates?
     **{f"linear_delta_{d:g}": {"drag_law": "linear", "delta_bar": d} for d in DELTA_STUDY},
-    # ... and the shipped (printed) law on the same sequence (delta_half is its 0.5)
-    **{f"delta_{d:g}": {"delta_bar": d} for d in (0.25, 0.2)},
+    # ... and the printed law on the same sequence (delta_half is its 0.5)
+    **{f"delta_{d:g}": {"drag_law": "printed", "delta_bar": d} for d in (0.25, 0.2)},
     # the trend points of the issue-12 study for the linear law at delta 1 and 0.2
     **{
         f"linear_delta_{d:g}_{k}_{v:g}": {"drag_law": "linear", "delta_bar": d, k: v}
         for d in (1.0, 0.2)
         for k, v in TREND_POINTS
     },
-    # the env's speed settings on the shipped model and on the linear law at delta 0.2
-    # (what the env runs with training/configs/eval_converged.yml), at the baseline and
-    # v = 0.12: what the speed settings cost each model
+    # the env's speed settings on the surrogate (the printed law at delta 1, what the
+    # agents train on) and on the model (the linear law at delta 0.2, the env's default),
+    # at the baseline and v = 0.12: what the speed settings cost each model
     **{
         f"{name}env{suffix}": {**model, **ENV_STEPPED, **point}
         for name, model in (
-            ("", {}),
+            ("surrogate_", {"drag_law": "printed", "delta_bar": 1.0}),
             ("linear_delta_0.2_", {"drag_law": "linear", "delta_bar": 0.2}),
         )
         for suffix, point in (("", {}), ("_vbar_0.12", {"vbar": 0.12}))
@@ -113,8 +114,9 @@ SERPENTINE_CASES: dict[str, dict] = {
 COIL_CASES: dict[str, dict] = {
     "default": {},
     "delta_1": {"delta_bar": 1.0, "coarse_delta": None},
-    "delta_0.5": {"delta_bar": 0.5},
-    "delta_0.25": {"delta_bar": 0.25},
+    # the printed law (the surrogate's) on the delta sequence
+    "delta_0.5": {"drag_law": "printed", "delta_bar": 0.5},
+    "delta_0.25": {"drag_law": "printed", "delta_bar": 0.25},
     "delta_half": {"delta_bar": 0.0625},
     "dt_half": {"dt_factor": 0.025},
     "Ri_4.8": {"initial_radius": 4.8},
@@ -123,9 +125,9 @@ COIL_CASES: dict[str, dict] = {
     "printed_drag_delta_1": {"drag_law": "printed", "delta_bar": 1.0, "coarse_delta": None},
     "uniform_0.25": {"delta_bar": 0.25, "coarse_delta": None},
     # the linear law on the serpentine's mesh sequence (SERPENTINE_CASES linear_delta_*),
-    # and the shipped (printed) law at its finest point
+    # and the printed law at its finest point
     **{f"linear_delta_{d:g}": {"drag_law": "linear", "delta_bar": d} for d in DELTA_STUDY},
-    "delta_0.2": {"delta_bar": 0.2},
+    "delta_0.2": {"drag_law": "printed", "delta_bar": 0.2},
 }
 
 

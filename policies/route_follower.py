@@ -2,7 +2,7 @@
 
 The nanotube is a pen whose *drift* follows the flow and which draws a band: a serpentine
 ~34 L_vb wide drifting ~0.16-0.19 L_vb per L_vb of trace along ±x (across the steps), an
-almost straight run drifting 0.6-1.0 along ±z (benchmarks/results/step_response.json).
+almost straight run drifting 0.6-1.0 along ±z (benchmarks/results/step_response_surrogate.json).
 Steering the contact point itself fails: it swings across the band every period. So the
 follower steers the pattern's *centre* toward a point ``lookahead`` L_vb ahead on the
 route. The observation's K trace points span ``trace_window`` = 64 L_vb, less than one

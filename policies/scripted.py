@@ -39,7 +39,7 @@ CURVE_RESOURCE = "data/amplitude_curve.json"
 def amplitude_curve(path: str | Path | None = None) -> tuple[np.ndarray, np.ndarray, str]:
     """The measured serpentine amplitude per v̄, sorted by v̄: ``(vbar, amplitude,
     source)``. Default: the curve shipped with the package (the band widths of the env's
-    step response, ``benchmarks/results/step_response.json``); with ``path``, a JSON file
+    step response, ``benchmarks/results/step_response_surrogate.json``); with ``path``, a JSON file
     of the same format (keys ``vbar``, ``amplitude``)."""
     if path is None:
         text = resources.files("policies").joinpath(CURVE_RESOURCE).read_text()

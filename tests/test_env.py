@@ -423,9 +423,10 @@ def test_target_starts_at_the_contact_point(kw: dict) -> None:
     # the first observed target point is target_spacing along the path from its start
     tgt = obs[env.observation_slices["target"]].reshape(-1, 2)
     assert np.hypot(*tgt[0]) == pytest.approx(env.target_spacing, rel=1e-5)
-    # the last observed trace point is the node deposited just before the contact point
+    # the last observed trace point is the node deposited just before the contact point,
+    # an edge (delta_bar) behind it
     past = obs[env.observation_slices["trace"]].reshape(-1, 2)
-    assert 0.5 < np.hypot(*past[-1]) < 1.5
+    assert 0.5 < np.hypot(*past[-1]) / env.params.delta_bar < 1.5
     with pytest.raises(ValueError):
         env.reset(options={"target": "nonsense"})
     with pytest.raises(ValueError):

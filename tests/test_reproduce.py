@@ -55,7 +55,7 @@ def test_ray_backend_gives_the_same_points(tmp_path: Path) -> None:
 
 def test_summary_compares_other_time_steps_with_the_default_point() -> None:
     """A point re-run at another dt_factor is listed with its relative change."""
-    lines = (ROOT / "benchmarks/results/reproduce/results.jsonl").read_text().splitlines()
+    lines = (ROOT / "benchmarks/results/reproduce_surrogate/results.jsonl").read_text().splitlines()
     recs = [json.loads(x) for x in lines]
     serp = next(r for r in recs if r["preset"] == "serpentine" and r["wavelength_x"])
     coil = next(r for r in recs if r["preset"] == "coil" and r["coil_radius"])
@@ -80,7 +80,7 @@ def test_summary_compares_other_time_steps_with_the_default_point() -> None:
 def test_seeds_section_judges_the_step_against_the_seeds_spread() -> None:
     """Several seeds of a point: mean +- sd per step, and the change of the mean is
     'within' only when it is below two standard errors of the difference."""
-    lines = (ROOT / "benchmarks/results/reproduce/results.jsonl").read_text().splitlines()
+    lines = (ROOT / "benchmarks/results/reproduce_surrogate/results.jsonl").read_text().splitlines()
     real = next(r for r in map(json.loads, lines) if r["groups"] == {"Hbar": 250.0})
     key = real["key"]  # default|serpentine|Hbar=250|coarse=...
 

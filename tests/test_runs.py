@@ -112,12 +112,13 @@ def test_estimated_nodes_counts_rod_and_trace() -> None:
     graded = runs.resolve_run("serpentine", deposit=100.0)  # the preset's graded rod
     uniform = runs.resolve_run("serpentine", deposit=100.0, coarse_delta=0.0)
     assert uniform.sim_config.coarse_delta is None and graded.sim_config.coarse_delta == 4.0
-    H = graded.params.Hbar
+    H, d = graded.params.Hbar, graded.params.delta_bar
+    assert d == uniform.params.delta_bar
     # the start-up quarter arc (R_i = 3.9), the fine 20 L_vb, the rest of Hbar, the trace
     assert runs.estimated_nodes(uniform.sim_config, 100.0) == int(
-        0.5 * math.pi * 3.9 + 20 + H + 100) + 4  # fmt: skip
+        0.5 * math.pi * 3.9 / d + 20 / d + H / d + 100 / d) + 4  # fmt: skip
     assert runs.estimated_nodes(graded.sim_config, 100.0) == int(
-        0.5 * math.pi * 3.9 + 20 + H / 4 + 100) + 4  # fmt: skip
+        0.5 * math.pi * 3.9 / d + 20 / d + H / 4 + 100 / d) + 4  # fmt: skip
 
 
 def test_graded_mesh_follows_delta_and_zero_means_uniform() -> None:

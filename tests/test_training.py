@@ -409,26 +409,28 @@ def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_i
     np.testing.assert_array_equal(np.array(via_wrapper), np.array(via_policy))
 
 
-def test_every_shipped_config_makes_its_env_and_eval_converged_swaps_the_physics() -> None:
-    """Each YAML in training/configs names env keywords the env accepts; the
-    converged-model evaluation config (training/configs/eval_converged.yml) runs the
-    linear drag law on a rod of delta_bar 0.2 where the training configs keep the
-    env's default physics."""
-    from cnt_env.presets import MODEL
-    from cnt_env.units import DEFAULT_DELTA_BAR
+def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_model() -> None:
+    """Each YAML in training/configs names env keywords the env accepts; the training
+    configs and the pretrained models' configs pin the fast surrogate
+    (presets.SURROGATE: the printed drag law at delta_bar 1), and the evaluation config
+    (training/configs/eval.yml, cnt-evaluate's default) keeps the env's default physics,
+    the model (presets.MODEL on presets.MESH's delta_bar)."""
+    from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
-    configs = sorted((Path(__file__).resolve().parents[1] / "training" / "configs").glob("*.yml"))
-    assert any(p.name == "eval_converged.yml" for p in configs)
+    root = Path(__file__).resolve().parents[1]
+    configs = sorted((root / "training" / "configs").glob("*.yml"))
+    configs += sorted((root / "policies" / "pretrained").glob("*.yml"))
+    assert any(p.name == "eval.yml" for p in configs)
+    surrogate = (SURROGATE["drag_law"], SURROGATE["delta_bar"])
+    model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
+    assert surrogate != model
     for path in configs:
         env_kwargs, steps = env_settings(load_config(path))
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
         try:
             base = env.unwrapped
-            if path.name == "eval_converged.yml":
-                assert (base.config.drag_law, base.params.delta_bar) == ("linear", 0.2)
-            else:
-                assert base.config.drag_law == MODEL["drag_law"]
-                assert base.params.delta_bar == DEFAULT_DELTA_BAR
+            physics = (base.config.drag_law, base.params.delta_bar)
+            assert physics == (model if path.name == "eval.yml" else surrogate), path.name
         finally:
             env.close()

@@ -8,7 +8,8 @@
    ``<out>/runs/ppo_s0``), to show the pipeline working end to end.
 2. Evaluation of random, constant (the committed grid-search choice,
    ``training/results/constant_best.json``), the scripted route follower and the
-   pretrained residual PPO (``policies/pretrained``) on held-out routes with 3 seeds: the
+   pretrained residual PPO (``policies/pretrained``, trained on the fast surrogate) on
+   held-out routes with 3 seeds, on the env's default physics (``eval.yml``): the
    table, ``summary.json`` and the trace plots in ``<out>/results``, the learning curve of
    step 1.
 3. A rerun recording per policy and target (first seed) in ``<out>/rrd`` when rerun is
@@ -31,8 +32,10 @@ from .evaluate import PRETRAINED, evaluate
 from .train import train
 
 RESULTS = Path(__file__).resolve().parent / "results"
-#: Config of the demo: the route task, as the pretrained models were trained on it.
+#: Configs of the demo: training on the fast surrogate, as the pretrained models were
+#: trained, and evaluation on the env's default physics (the model), as cnt-evaluate's.
 DEMO_CONFIG = "ppo.yml"
+DEMO_EVAL_CONFIG = "eval.yml"
 #: Pretrained models the demo evaluates (the best one; cnt-evaluate runs them all).
 DEMO_MODELS = ("ppo_residual",)
 #: Share of the budget given to the short training run.
@@ -75,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         policies,
         targets,
         seeds,
-        config,
+        load_config(CONFIG_DIR / DEMO_EVAL_CONFIG),
         args.out / "results",
         models=PRETRAINED,
         runs=runs,

@@ -2,14 +2,15 @@
 
     cnt-evaluate [--policies random,constant,scripted,ppo,sac] [--targets all]
                  [--seeds 0,1,2] [--models policies/pretrained] [--runs DIR ...]
-                 [--config training/configs/ppo.yml] [--constant-from FILE]
+                 [--config training/configs/eval.yml] [--constant-from FILE]
                  [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
                  [--video DIR [--video-format mp4|gif]] [--trust]
                  [--reuse DIR ... [--redo POLICIES]]
 
 For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 with the
-env settings of ``--config`` (the ones the models were trained with) and writes, in
-``--out``:
+env settings of ``--config`` (by default ``eval.yml``: the env's default physics, the
+model; a training config gives the fast surrogate the agents were trained on) and
+writes, in ``--out``:
 
 * ``episodes.csv``: one row per episode (final score Φ, its terms, mean distance,
   length laid, steps, success, failure, wall time);
@@ -82,7 +83,7 @@ BASELINES = ("random", "constant", "scripted")
 TERMS = ("score", "coverage", "precision", "progress", "mean_distance")
 #: Grid of the constant-flow search: speeds (e_v / (mu H)) and number of directions. The
 #: paper's baseline speed and the three of the route task's step response (band 34-51
-#: L_vb peak to peak at 0.13-0.065, benchmarks/results/step_response.json), so that the
+#: L_vb peak to peak at 0.13-0.065, benchmarks/results/step_response_surrogate.json), so that the
 #: oracle has every band width that could fit a corridor.
 CONSTANT_SPEEDS = (0.037, 0.065, 0.1, 0.13)
 CONSTANT_DIRECTIONS = 8
@@ -717,7 +718,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="held-out names (routes, or thin targets with score: thin), comma "
                         "separated, or all")  # fmt: skip
     p.add_argument("--seeds", default="0,1,2", help="comma separated episode seeds")
-    p.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml",
+    p.add_argument("--config", type=Path, default=CONFIG_DIR / "eval.yml",
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
     p.add_argument("--models", type=Path, default=PRETRAINED,
                    help="directory of the models <policy>.zip, their <policy>_vecnormalize"

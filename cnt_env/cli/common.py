@@ -161,7 +161,8 @@ def add_group_arguments(g: Any) -> None:
         "--delta",
         type=float,
         help="discretisation length delta / L_vb (default: the preset's mesh, presets.MESH: "
-        "delta = 1 on both presets)",
+        f"delta = {MESH['serpentine']['delta_bar']:g} on both presets; 1 with "
+        "--drag-law printed is the fast surrogate, presets.SURROGATE)",
     )
     g.add_argument(
         "--dt",
@@ -176,7 +177,7 @@ def add_model_arguments(m: Any) -> None:
         "--drag-law",
         choices=DRAG_LAWS,
         default=MODEL["drag_law"],
-        help=f"drag law (default: {MODEL['drag_law']}, the paper's eq. 2 as printed)",
+        help=f"drag law (default: {MODEL['drag_law']}; printed: the paper's eq. 2 as printed)",
     )
     m.add_argument(
         "--sliding",

@@ -56,7 +56,7 @@ DEFAULT_VBAR_MAX = 0.13
 #: the suspended rod leans the new way after a switch of the flow direction (23-27 L_vb
 #: when chosen; 28-44, then 15-20 with the lagged Jacobian, 9-31 with the env's mesh,
 #: re-measured on the shipped simulator, noisy medians over six switches:
-#: benchmarks/results/step_response.json, docs/task.md), so the agent never
+#: benchmarks/results/step_response_surrogate.json, docs/task.md), so the agent never
 #: acts faster than the rod can follow; the pattern's drift follows in a few intervals.
 CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 30.0}
 #: Trace window (L_vb) the K trace points of the observation span in the route task:
@@ -93,7 +93,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     The agent sets the rarefied gas flow in the substrate plane every control interval.
     The flow steers the pattern's *drift*: across the steps (±x) a serpentine band 26-39
     L_vb wide drifts 0.16-0.27 L_vb per L_vb of trace at v̄ = 0.13; along them (±z) an
-    almost straight run drifts 0.62-0.76 (benchmarks/results/step_response.json,
+    almost straight run drifts 0.62-0.76 (benchmarks/results/step_response_surrogate.json,
     docs/task.md).
 
     The task (``score="corridor"``, default; docs/task.md): lay the trace along a circuit
@@ -205,13 +205,13 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `substrate`        | preset's     | "stepped" or "flat" (flat: κ̄_c = None)          |
     | `Hbar`, `Ibar`     | preset's     | rod height (L_vb), mass per length              |
     | `kappa_c_bar`      | 0.2          | critical curvature (stepped only; 1/L_vb)       |
-    | `delta_bar`        | 1.0          | discretisation length (L_vb)                    |
+    | `delta_bar`        | 0.2          | discretisation length (L_vb; presets.MESH)      |
     | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
     | `dt`               | 0.2/0.1 H̄    | stepped/flat time step (tau); ENV_SIM_DEFAULTS  |
     | `coarse_delta`     | 6.0          | graded mesh (DepositionConfig); ENV_MESH        |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
-    | `drag_law`         | "printed"    | "linear" or "printed" (presets.MODEL)           |
+    | `drag_law`         | "linear"     | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
     | `control_interval` | 12 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
@@ -243,6 +243,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
+    * v0, revision 5 (issue 12's model): the default physics is the mesh-converged model
+      (``presets.MODEL`` and ``MESH``: the linear drag law on a rod of delta_bar = 0.2)
+      instead of the printed law at delta_bar = 1, which stays as the fast surrogate
+      (``presets.SURROGATE``: ``drag_law="printed", delta_bar=1.0``, 13.8x the trace per
+      CPU-second on the serpentine, 4.1x on the coil) that training/configs train on;
+      rollouts differ from revision 4's.
     * v0, revision 4 (simulator speed and robustness): the env's suspended rod is graded
       more coarsely than the model's (``presets.ENV_MESH``: ``coarse_delta`` 6 within
       ``fine_length`` 10, against ``presets.MESH``'s 4 / 20; serpentine A and lambda

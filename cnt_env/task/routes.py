@@ -7,7 +7,7 @@ it, optional ``pads`` (segments the trace must cross, like electrodes) and optio
 ``keepouts`` (polygons the trace must not enter, like a neighbouring wire).
 
 The corridor's default half-width, :data:`DEFAULT_HALF_WIDTH`, comes from the measured
-band widths (``benchmarks/results/step_response.json``): a constant flow across the steps
+band widths (``benchmarks/results/step_response_surrogate.json``): a constant flow across the steps
 lays a serpentine band 34 L_vb peak-to-peak at v̄ = 0.13, 37 at 0.1 and 51 at 0.065 (36, 33
 and 47, then 35, 34 and 49, then 35, 32 and 32 with the env's graded rod, re-measured on
 the shipped simulator, docs/task.md); along
@@ -74,7 +74,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: Default corridor half-width w (L_vb): the narrowest measured band (33.9 L_vb peak to
-#: peak at v̄ = 0.13, benchmarks/results/step_response.json) fits with ~1.5 L_vb to spare.
+#: peak at v̄ = 0.13, benchmarks/results/step_response_surrogate.json) fits with ~1.5 L_vb to spare.
 DEFAULT_HALF_WIDTH = 18.5
 #: Every length of the families and held-out routes below was designed for a band that
 #: fits w = 15 (27 L_vb peak to peak, the first model's); they scale with the band, so
@@ -89,11 +89,11 @@ DEFAULT_DIFFICULTY = 0.5
 
 
 #: Trace laid per Hbar of simulated time (L_vb / Hbar; 1.20 L_vb per 1.5 Hbar step in
-#: benchmarks/results/step_response.json).
+#: benchmarks/results/step_response_surrogate.json).
 DEPOSITION_SPEED = 0.80
 #: Progress of the pattern along a route per L_vb of trace at the slowest useful flow
 #: (the serpentine across the steps at v̄ = 0.13 drifts 0.16-0.19; along the steps
-#: 0.6-1.0; benchmarks/results/step_response.json): it sets the per-route episode length.
+#: 0.6-1.0; benchmarks/results/step_response_surrogate.json): it sets the per-route episode length.
 PROGRESS_RATE = 0.17
 #: Route episodes last ROUTE_STEPS_SLACK times the steps the measured rate needs, plus
 #: ROUTE_STEPS_MARGIN (the pattern's response to the first turn).

@@ -129,13 +129,15 @@ def physics_params(
     phi: float | None,
     physics: Mapping[str, Any] | None,
 ) -> DimensionlessParams:
-    """The dimensionless groups: the preset's, with the keywords on top."""
+    """The dimensionless groups: the preset's, on the model's mesh (``presets.MESH``
+    delta_bar), with the keywords on top."""
     base = paper_groups(preset)
     if substrate is None:
         substrate = "flat" if base.kappa_c_bar is None else "stepped"
     if substrate not in SUBSTRATES:
         raise ValueError(f"substrate must be one of {SUBSTRATES}, got {substrate!r}")
-    overrides: dict[str, Any] = mapping_or_none("physics", physics)
+    overrides: dict[str, Any] = {"delta_bar": mesh_for(preset)["delta_bar"]}
+    overrides.update(mapping_or_none("physics", physics))
     for name, value in (("Hbar", Hbar), ("Ibar", Ibar), ("delta_bar", delta_bar),
                         ("vbar", vbar), ("phi", phi)):  # fmt: skip
         if value is not None:
