@@ -3,6 +3,7 @@ second call resumes (runs nothing); with Ray (slow) the same points come out the
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -105,3 +106,28 @@ def test_seeds_section_judges_the_step_against_the_seeds_spread() -> None:
     # the main tables see seed 0 at the default step alone
     text = reproduce.summary(recs, "default")
     assert "## Seeds" in text and "(1 points)" in text
+
+
+def test_default_keys_name_the_model_so_the_previous_default_is_never_reused() -> None:
+    """The "default" candidate follows presets.py: its keys name the model fields that
+    differ from the previous default (LEGACY_DEFAULT_MODEL, the printed law at delta_bar
+    1), so none of the previous default's records (benchmarks/results/reproduce_surrogate)
+    is taken for a point of today's; a named candidate fixes its model and its keys name
+    none."""
+    from cnt_env.presets import MESH, MODEL
+
+    table = reproduce.rows(False)
+    points = [p for row in table.values() for p in row]
+    old = set(_records(ROOT / "benchmarks/results/reproduce_surrogate"))
+    now = {reproduce.point_key(p, "default", None) for p in points}
+    assert len(now) == len(points) and not now & old
+    suffix = f"|drag_law={MODEL['drag_law']}|delta_bar={MESH['serpentine']['delta_bar']:g}"
+    assert all(key.endswith(suffix) for key in now)
+    # the same model under its candidate name: the name fixes it, the key does not list it
+    assert all("drag_law" not in reproduce.point_key(p, "C_fine", None) for p in points)
+    # a default equal to the previous one names nothing: its old records stay its own
+    legacy = {k: v for k, v in reproduce.LEGACY_DEFAULT_MODEL.items() if k != "delta_bar"}
+    cfg = reproduce.point_config(points[0], "default", None)
+    cfg = dataclasses.replace(cfg, params=dataclasses.replace(cfg.params, delta_bar=1.0),
+                              **legacy)  # fmt: skip
+    assert reproduce._default_model_fields(cfg) == ""
