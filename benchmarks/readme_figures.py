@@ -3,7 +3,7 @@
     python benchmarks/readme_figures.py        # writes docs/serpentines.png
 
 No simulation: it plots ``benchmarks/results/reproduce/traces`` (the default
-configuration, dt_factor 0.05, 4000 L_vb per point), the last ``--window``
+configuration, dt_factor 0.05, 3000 L_vb per point), the last ``--window``
 L_vb of each, with the amplitude and wavelength that ``cnt_env.patterns`` measures on
 the whole trace (the numbers of ``benchmarks/RESULTS.md``, issue 12).
 """
@@ -22,7 +22,9 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 # the table's serpentine run (reproduce.SERPENTINE_RUN, 150 dropped), the model's mesh,
 # tolerance, length projection, edge-rotation check and lagged Jacobian (presets)
-_MESH = "run=4000-150__coarse=4_fine=20_tol=1e-05_proj=0.02_rot=30_lag"
+_MESH = (
+    "run=3000-150__coarse=4_fine=20_tol=1e-05_proj=0.02_rot=30_lag__drag_law=linear__delta_bar=0.2"
+)
 PANELS = (
     (f"reproduce/traces/default__serpentine__vbar=0.005__{_MESH}.npy", "v̄ = 0.005, φ = 0"),
     (

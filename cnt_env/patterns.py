@@ -952,7 +952,10 @@ def _pattern(
     if length < options.min_judged_length:
         return "too_short"
     median = coil["median"]
-    if math.isfinite(median):
+    # a stepped trace with U-turns whose tangent never makes a full turn (no loop, no
+    # self-crossing) is a meander, not a coil, however well its caps fit one circle
+    meander = substrate == "stepped" and serp["n_uturns"] >= 2 and not loops["has_loops"]
+    if math.isfinite(median) and not meander:
         p16, p84 = coil["spread"]
         if (
             (p84 - p16) / (2.0 * median) < options.coil_max_rel_spread
@@ -1081,7 +1084,11 @@ def classify(
        ``(p84 - p16) / (2 median)`` is below ``coil_max_rel_spread``, and at least
        ``coil_min_turn_sign_fraction`` of them turn the same way or every run of
        them turning the same way spans ``coil_min_run_turns`` turns (a coil that
-       reverses its handedness between long coiled stretches).
+       reverses its handedness between long coiled stretches). Never on the
+       ``"stepped"`` substrate for a trace with two U-turns or more and neither a loop
+       nor a self-crossing: its tangent never makes a full turn, so it is a meander
+       whose caps may fit one big circle loosely (a serpentine of the Ī = 30 sweep point
+       did, radius 49 against its amplitude 32).
     4. On the ``"stepped"`` substrate, with at least two U-turns:
        ``"serpentine-coil"`` if it has at least ``serpentine_coil_min_loops`` loop
        events and at least ``serpentine_coil_loop_density`` of them per cycle (a loop

@@ -643,3 +643,18 @@ def test_a_coil_that_reverses_its_handedness_is_a_coil() -> None:
     assert alternating["pattern"] != "coil"
     strict = MeasureOptions(transient_length=0.0, coil_min_run_turns=1e9)  # the rule before
     assert measure(_loops([10.0, -8.0]), strict)["pattern"] != "coil"
+
+
+def test_a_meander_whose_caps_fit_one_loose_circle_is_not_a_coil() -> None:
+    """The model's serpentine at Ibar = 30 (benchmarks/reproduce.py, 3000 L_vb, 150
+    dropped; float32 (x, z)): 20 regular cycles, no loop and no self-crossing, but its
+    one-turn windows fit circles of radius ~49 within the loose residual over 82% of the
+    arc, all turning the same way, so the coil rule alone called it a coil. A stepped
+    trace with U-turns whose tangent never makes a full turn is a meander."""
+    trace = np.load(Path(__file__).parent / "data" / "serpentine_ibar30.npz")["trace"]
+    result = measure(trace.astype(np.float64), MeasureOptions(transient_length=150.0),
+                     substrate="stepped")  # fmt: skip
+    assert result["coil_loose_coverage"] >= 0.8  # what the coil rule alone accepts
+    assert result["n_loop_events"] == 0 and result["n_self_crossings"] == 0
+    assert result["pattern"] == "periodic-serpentine"
+    assert result["amplitude"] == pytest.approx(32.37, abs=0.01)
