@@ -134,11 +134,12 @@ DEFAULT_KAPPA_C: float = PAPER_KAPPA_C_BAR
 #: the length for the surrogate's ~170 L_vb cycles, costs ~540 s per point on the model.)
 RUN_DEPOSIT: MappingProxyType[str, float] = MappingProxyType({"coil": 1500.0, "serpentine": 3000.0})
 #: Start-up length dropped before measuring. Coil: the paper's transient, "about 2 us",
-#: is 913 L_vb of trace at the model's deposition speed (0.00327 L_vb per tau, tau = 7.16
-#: ps at the coil preset). With 300 dropped of 800, 2 of seeds 0-5 were still precessing
-#: rosettes (no coil radius); with 900 of 1500, seeds 0-6 give R0 7.913-7.915 and seed 7
-#: is still a rosette (RESULTS.md, issue 12, "The coil's start-up"). Serpentines settle
-#: after ~150.
+#: is 913 L_vb of trace at the surrogate's deposition speed (0.00327 L_vb per tau, tau =
+#: 7.16 ps at the coil preset; chosen when the surrogate was the model). With 300 dropped
+#: of 800, 2 of its seeds 0-5 were still precessing rosettes (no coil radius); with 900 of
+#: 1500, seeds 0-6 give R0 7.913-7.915 and seed 7 is still a rosette (RESULTS.md, issue
+#: 12, "The coil's start-up"). The model lays a coil at 1500 / 900 at every point of the
+#: reproduction's coil rows (seed 0; other seeds not run). Serpentines settle after ~150.
 RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 900.0, "serpentine": 150.0})
 #: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
 DEMO_DEPOSIT: float = 300.0
