@@ -24,7 +24,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from cnt_env.presets import ENV_MESH, ENV_SIM_DEFAULTS
+from cnt_env.presets import ENV_MESH, ENV_SIM_DEFAULTS, SURROGATE
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 #: the env's speed settings on the stepped substrate (step, solved tail, graded rod)
@@ -103,7 +103,7 @@ SERPENTINE_CASES: dict[str, dict] = {
     **{
         f"{name}env{suffix}": {**model, **ENV_STEPPED, **point}
         for name, model in (
-            ("surrogate_", {"drag_law": "printed", "delta_bar": 1.0}),
+            ("surrogate_", dict(SURROGATE)),
             ("linear_delta_0.2_", {"drag_law": "linear", "delta_bar": 0.2}),
         )
         for suffix, point in (("", {}), ("_vbar_0.12", {"vbar": 0.12}))
