@@ -127,14 +127,21 @@ def base_options(name: str, score_mode: str, base_kwargs: dict | None = None) ->
     """Every option of the base policy ``name`` for the task ``score_mode``: its
     defaults, overridden by ``base_kwargs``. The training run writes them into the
     model's config (``env_wrapper`` ``base_kwargs``), so a model keeps the base it was
-    trained on when the base's defaults change later. An unknown option raises."""
+    trained on when the base's defaults change later. A config that pins every option
+    but some the base gained since (``cls.ADDED``: each with the value that reproduces the
+    base before it) was written before them: those take that value, not today's default.
+    An unknown option raises."""
     cls = _base_class(name, score_mode)
     defaults = cls.OPTIONS
-    unknown = set(base_kwargs or {}) - set(defaults)
+    given = dict(base_kwargs or {})
+    unknown = set(given) - set(defaults)
     if unknown:
         raise ValueError(f"unknown option(s) {sorted(unknown)} of the {cls.__name__} base; "
                          f"its options are {sorted(defaults)}")  # fmt: skip
-    return {**defaults, **(base_kwargs or {})}
+    added = getattr(cls, "ADDED", {})
+    if given and set(defaults) - set(added) <= set(given):  # pinned before ``added``
+        given = {**{k: v for k, v in added.items() if k not in given}, **given}
+    return {**defaults, **given}
 
 
 def make_base_policy(name: str, env, base_kwargs: dict | None = None):

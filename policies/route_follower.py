@@ -41,7 +41,12 @@ line). Without the route it uses the window's mean. Then:
   ``policies/data/amplitude_curve.json``: A = 17 L_vb at v̄ = 0.13, 19 at 0.1, ...),
   v̄_max when none fits (the narrowest band). With the measured curve that is v̄_max for
   every corridor: the fastest flow both drifts fastest (0.19 L_vb per L_vb at 0.13, 0.10
-  at 0.065) and lays the narrowest band. ``margin`` narrows what "fits".
+  at 0.065) and lays the narrowest band. ``margin`` narrows what "fits";
+* a run along the steps can hook and lay itself *upstream* on the model (docs/task.md,
+  "Why routes and corridors"): when the last flow was within 30° of the steps and the
+  contact point ran along them against it over the last control step (by more than
+  ``hook_tol`` = 2 L_vb), the flow is turned ``unhook`` = 0.5 rad (counter-clockwise)
+  off the aim. The contact leaves its step edge and the run follows the flow again.
 
 Measured on routes drawn from the training families, never the held-out set
 (``python benchmarks/follower_study.py``, ``benchmarks/results/follower_study.jsonl``):
@@ -56,6 +61,23 @@ seeds 0-5): mean 0.855 without it (``lead`` 0), 0.883 at 1, 0.884 at 2; on detou
 is not distinguishable from it. A probe that capped the plan's band at the corridor
 half-width (instead of the widest band seen) raised the detours' precision but shorted 3
 of 8 (0.47 against 0.51) and was dropped.
+The unhook (study "2026-11-26 unhook" in ``benchmarks/results/follower_study_converged.jsonl``:
+the model, ``--config training/configs/eval.yml``, 8 families x seeds 0-2): mean 0.821
+without it (``unhook`` 0), **0.844** with it (variant ``unhook_steps``: l_route 0.852 ->
+0.970, detour 0.051 -> 0.205, pads 0.924 -> 0.813, the rest within 0.03). A first rule,
+any contact run against the last flow (mostly anti-parallel to it), scored 0.841 here
+(0.823 at -0.5 rad, 0.822 with ``hook_tol`` 4, 0.841 at 0.3 rad, these three with a probe
+aiming past the route's end, which alone changed nothing, 0.820, and was dropped) but
+also fired on the serpentine's swings under diagonal flows: on the held-out routes,
+seeds 0-2, it scored 0.843 against 0.860 without it (l_up 0.671 -> 0.873, detour_block
+0.442 -> 0.559, diagonal 0.981 -> 0.827, staircase3 0.957 -> 0.762). The shipped rule
+keeps to the mechanism seen (a flow along the steps, the contact rolling along its step
+edge). On the held-out routes it scores 0.882 on seeds 0-2 against 0.860 without it
+(l_up 0.671 -> 0.948, detour_block 0.442 -> 0.595, staircase3 0.957 -> 0.851,
+arc_quarter 0.951 -> 0.852, u_turn 0.868 -> 0.838) and 0.866 over seeds 0-8 against
+0.853. It completes 79 of the 81 episodes (not detour_block at seeds 3 and 6, cut at
+0.92 and 0.99 of the route), against 74 without it; why it loses on staircase3 and
+arc_quarter is not established.
 """
 
 from __future__ import annotations
@@ -96,6 +118,8 @@ class RouteFollower:
         behind: float = 30.0,
         memory: int = 4,
         lead: float = 1.0,
+        unhook: float = 0.5,
+        hook_tol: float = 2.0,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -119,6 +143,14 @@ class RouteFollower:
         if not (math.isfinite(lead) and lead >= 0.0):
             raise ValueError(f"lead must be >= 0 control steps, got {lead!r}")
         self.lead = float(lead)
+        if not (math.isfinite(unhook) and abs(unhook) <= math.pi / 2):
+            raise ValueError(f"unhook must be an angle in [-pi/2, pi/2] rad, got {unhook!r}")
+        self.unhook = float(unhook)
+        if not (math.isfinite(hook_tol) and hook_tol >= 0.0):
+            raise ValueError(f"hook_tol must be >= 0 L_vb, got {hook_tol!r}")
+        self.hook_tol = float(hook_tol)
+        self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
+        self._prev_phi: float | None = None  # the flow direction of the last action
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
         self._env = None  # set by from_env: where the route (and its keep-outs) comes from
         self._route = None  # the route of the state below (cleared when it changes)
@@ -153,7 +185,7 @@ class RouteFollower:
         if route is not self._route:
             self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
-            self._prev_centre = None
+            self._prev_centre = self._prev_contact = self._prev_phi = None
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
         self._s_next = min(float(o[self.slices["progress"].start]) * s[-1] + self.spacing, s[-1])
@@ -246,6 +278,25 @@ class RouteFollower:
         prev, self._prev_centre = self._prev_centre, now
         return centre if prev is None else centre + self.lead * (now - prev)
 
+    def hooked(self, contact: np.ndarray | None) -> bool:
+        """Whether a run along the steps hooked: the last flow was within 30° of the
+        steps' direction (±z) and over the last control step the contact point ran along
+        the steps (|Δx| <= |Δz| / 2) *against* it by more than ``hook_tol`` L_vb. Such a
+        run can lay itself upstream: the rod hooks back at the contact and the hook rolls
+        along its step edge against the flow while the suspended span streams downstream
+        and lengthens (docs/task.md, "Why routes and corridors"). A flow turned
+        ``unhook`` off the run breaks it: the contact leaves its step edge. Needs the
+        route (the contact in its frame)."""
+        if contact is None or self.unhook == 0.0:
+            return False
+        prev, self._prev_contact = self._prev_contact, contact.copy()
+        if prev is None or self._prev_phi is None:
+            return False
+        f_z = math.sin(self._prev_phi)
+        dx, dz = contact - prev
+        return (abs(f_z) >= math.cos(math.radians(30.0)) and abs(dx) <= 0.5 * abs(dz)
+                and dz * math.copysign(1.0, f_z) < -self.hook_tol)  # fmt: skip
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         o = np.asarray(obs, dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
@@ -277,11 +328,17 @@ class RouteFollower:
         if math.hypot(*aim) < 1e-9:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])
+        if self.hooked(contact):
+            phi += self.unhook
+        self._prev_phi = phi
         return action_from_flow(vbar, phi, self.vbar_max)
 
 
 #: The follower's options and their defaults (the spacing comes from the env).
 RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
+#: Options added after trained agents began pinning their base's options, each with the
+#: value that reproduces the follower before it (policies/residual.py, base_options).
+RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0}
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

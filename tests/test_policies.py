@@ -242,3 +242,39 @@ def test_route_follower_leads_the_centre_by_its_last_displacement() -> None:
     for bad in (-1.0, math.nan):
         with pytest.raises(ValueError, match="lead"):
             RouteFollower(layout.slices, 0.13, lead=bad)
+
+
+def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
+    """``hooked``: the last flow within 30° of the steps (±z) and the contact ran along
+    them against it by more than ``hook_tol``; then the flow turns ``unhook`` off the
+    aim. A contact moving with the flow or across the steps, by less than the tolerance,
+    or after a flow across or diagonal to the steps (a serpentine's swing) is not
+    hooked; without the route (no contact) or with unhook 0 nothing is checked."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    layout = ObservationLayout(4, 4, (2.0,), route=True)
+
+    def after(step: list[float], phi: float = math.pi / 2, **kw) -> bool:
+        pol = RouteFollower(layout.slices, 0.13, **kw)
+        pol._prev_phi = phi  # the last flow (default: along +z)
+        assert not pol.hooked(np.array([5.0, 10.0]))  # the first contact: nothing to compare
+        return pol.hooked(np.array([5.0, 10.0]) + np.array(step))
+
+    assert after([0.0, -3.0])  # 3 L_vb upstream
+    assert after([1.0, -3.0])  # mostly along the steps
+    assert after([0.0, 3.0], phi=-math.pi / 2)  # upstream of a flow along -z
+    assert after([0.0, -3.0], phi=math.radians(65.0))  # within 30° of the steps
+    assert not after([0.0, 3.0])  # with the flow
+    assert not after([3.0, -3.0])  # across the steps as much as along
+    assert not after([0.0, -3.0], phi=math.pi / 4)  # a diagonal flow's serpentine swing
+    assert not after([0.0, -3.0], phi=0.0)  # a flow across the steps
+    assert not after([0.0, -1.5])  # within hook_tol = 2
+    assert after([0.0, -1.5], hook_tol=1.0)
+    assert not after([0.0, -3.0], unhook=0.0)
+    assert not RouteFollower(layout.slices, 0.13).hooked(None)
+    for bad in (2.0, math.nan):
+        with pytest.raises(ValueError, match="unhook"):
+            RouteFollower(layout.slices, 0.13, unhook=bad)
+    with pytest.raises(ValueError, match="hook_tol"):
+        RouteFollower(layout.slices, 0.13, hook_tol=-1.0)

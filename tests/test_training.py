@@ -293,6 +293,26 @@ def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
         base_options("scripted", "corridor", {"lookahaed": 10.0})
 
 
+def test_a_config_pinned_before_an_option_existed_keeps_the_base_without_it() -> None:
+    """Options the follower gained after pinning began (``RouteFollower.ADDED``) take
+    their old value in a config that pins every other option (the shipped agent's), and
+    today's default in a partial or absent one."""
+    from policies import RouteFollower
+    from policies.residual import base_options
+
+    added = RouteFollower.ADDED
+    assert added and set(added) <= set(RouteFollower.OPTIONS)
+    old = {k: v for k, v in RouteFollower.OPTIONS.items() if k not in added}
+    assert base_options("scripted", "corridor", old) == {**RouteFollower.OPTIONS, **added}
+    # an option the old config pins itself wins over the legacy value
+    some = next(iter(added))
+    got = base_options("scripted", "corridor", {**old, some: RouteFollower.OPTIONS[some]})
+    assert got[some] == RouteFollower.OPTIONS[some]
+    assert base_options("scripted", "corridor", {"lead": 2.0}) == {**RouteFollower.OPTIONS,
+                                                                    "lead": 2.0}  # fmt: skip
+    assert base_options("scripted", "corridor", None) == RouteFollower.OPTIONS
+
+
 def test_zoo_lists_read_and_pin_in_every_rl_zoo_form() -> None:
     """rl-zoo writes a wrapper as a bare name, a one-key dict, or a list of either; the
     residual settings are read from, and pinned into, each form; other entries survive."""
