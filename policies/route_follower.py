@@ -120,6 +120,7 @@ class RouteFollower:
         lead: float = 1.0,
         unhook: float = 0.5,
         hook_tol: float = 2.0,
+        unhook_away: bool = False,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -149,6 +150,7 @@ class RouteFollower:
         if not (math.isfinite(hook_tol) and hook_tol >= 0.0):
             raise ValueError(f"hook_tol must be >= 0 L_vb, got {hook_tol!r}")
         self.hook_tol = float(hook_tol)
+        self.unhook_away = bool(unhook_away)
         self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
         self._prev_phi: float | None = None  # the flow direction of the last action
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
@@ -297,6 +299,16 @@ class RouteFollower:
         return (abs(f_z) >= math.cos(math.radians(30.0)) and abs(dx) <= 0.5 * abs(dz)
                 and dz * math.copysign(1.0, f_z) < -self.hook_tol)  # fmt: skip
 
+    def unhook_turn(self, phi: float) -> float:
+        """The turn of a hooked flow ``phi``: ``unhook`` counter-clockwise, or with
+        ``unhook_away`` that angle away from the steps' axis (±z) toward ±x, the side the
+        flow already leans to: a flow at 66° turns to 37°, not to 95°, where it would run
+        along the steps again. A flow exactly along ±z turns counter-clockwise."""
+        if not self.unhook_away:
+            return self.unhook
+        lean = math.cos(phi) * math.sin(phi)  # > 0: the flow leans off ±z clockwise
+        return -self.unhook if lean > 1e-12 else self.unhook  # 1e-12: cos(pi/2) rounds
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         o = np.asarray(obs, dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
@@ -329,7 +341,7 @@ class RouteFollower:
             return np.zeros(2, dtype=np.float32)
         phi = math.atan2(aim[1], aim[0])
         if self.hooked(contact):
-            phi += self.unhook
+            phi += self.unhook_turn(phi)
         self._prev_phi = phi
         return action_from_flow(vbar, phi, self.vbar_max)
 
@@ -338,7 +350,7 @@ class RouteFollower:
 RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
-RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0}
+RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False}
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

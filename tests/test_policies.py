@@ -278,3 +278,25 @@ def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
             RouteFollower(layout.slices, 0.13, unhook=bad)
     with pytest.raises(ValueError, match="hook_tol"):
         RouteFollower(layout.slices, 0.13, hook_tol=-1.0)
+
+
+def test_route_follower_unhooks_away_from_the_steps_axis() -> None:
+    """``unhook_turn``: counter-clockwise by default; with ``unhook_away`` the flow
+    turns away from ±z toward the side it leans to, so its across-step part grows in all
+    four quadrants, and a flow exactly along ±z turns counter-clockwise."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    slices = ObservationLayout(4, 4, (2.0,), route=True).slices
+    ccw = RouteFollower(slices, 0.13, unhook=0.5)
+    away = RouteFollower(slices, 0.13, unhook=0.5, unhook_away=True)
+    for deg in (66.0, 114.0, -66.0, -114.0, 90.0, -90.0):
+        phi = math.radians(deg)
+        assert ccw.unhook_turn(phi) == 0.5
+        turned = phi + away.unhook_turn(phi)
+        if abs(abs(deg) - 90.0) > 1e-9:
+            assert abs(math.cos(turned)) > abs(math.cos(phi))  # further off the steps
+        else:
+            assert turned == pytest.approx(phi + 0.5)
+    turned = math.degrees(math.radians(66.0) + away.unhook_turn(math.radians(66.0)))
+    assert turned == pytest.approx(66.0 - math.degrees(0.5))  # 66° -> 37°
