@@ -281,15 +281,15 @@ def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
 
 
 def test_route_follower_unhooks_away_from_the_steps_axis() -> None:
-    """``unhook_turn``: counter-clockwise by default; with ``unhook_away`` the flow
+    """``unhook_turn``: with ``unhook_away`` (the default) the flow
     turns away from ±z toward the side it leans to, so its across-step part grows in all
     four quadrants, and a flow exactly along ±z turns counter-clockwise."""
     from cnt_env.task.spaces import ObservationLayout
     from policies import RouteFollower
 
     slices = ObservationLayout(4, 4, (2.0,), route=True).slices
-    ccw = RouteFollower(slices, 0.13, unhook=0.5)
-    away = RouteFollower(slices, 0.13, unhook=0.5, unhook_away=True)
+    ccw = RouteFollower(slices, 0.13, unhook=0.5, unhook_away=False)
+    away = RouteFollower(slices, 0.13, unhook=0.5)  # the default: away
     for deg in (66.0, 114.0, -66.0, -114.0, 90.0, -90.0):
         phi = math.radians(deg)
         assert ccw.unhook_turn(phi) == 0.5
