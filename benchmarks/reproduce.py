@@ -318,6 +318,8 @@ def point_key(point: dict[str, Any], candidate: str, dt_factor: float | None,
         g += "|run={:g}-{:g}".format(*point["run"])
     dt = "" if dt_factor is None else f"|dt={dt_factor:g}"
     cfg = point_config(point, candidate, dt_factor)
+    if _capped(cfg.params.Hbar, cfg.step_hbar_cap):  # named when it sets the step
+        dt += f"|dtcap={cfg.step_hbar_cap:g}"
     mesh = f"coarse={cfg.coarse_delta or 0:g},fine={cfg.fine_length:g}"
     sd = f"|seed={seed}" if seed else ""
     proj = cfg.newton.length_projection  # named when on (records before it ran without)
@@ -386,6 +388,8 @@ def run_point(
         "Ibar": p.Ibar,
         "delta_bar": p.delta_bar,
         "dt_factor": cfg.dt_factor,
+        "dt_hbar_cap": cfg.step_hbar_cap,
+        "dt": cfg.time_step,
         "drag_law": cfg.drag_law,
         "sliding": cfg.sliding,
         "snap": cfg.snap,
@@ -508,6 +512,20 @@ def invocations_text(out: Path) -> str:
             lines.append(f"| {r['finished']} | {r['points']} | {dt} | {r['jobs']} "
                          f"| {r['wall_s']} | `{' '.join(r['argv'])}` |")  # fmt: skip
     return "\n".join(lines) + "\n"
+
+
+def _capped(hbar: float, cap: float | None) -> bool:
+    """The step cap (DepositionConfig.dt_hbar_cap) sets the step at this Hbar."""
+    return cap is not None and hbar > cap
+
+
+def _before_cap(rec: dict[str, Any]) -> bool:
+    """The record ran before the step was capped in absolute time at a point where the
+    cap now sets it (RESULTS.md, issue 12): kept in results.jsonl, out of the tables."""
+    from cnt_env.presets import STEP_HBAR_CAP
+
+    cap = STEP_HBAR_CAP["flat" if rec["kappa_c_bar"] is None else "stepped"]
+    return _capped(rec["Hbar"], cap) and "|dtcap=" not in rec["key"]
 
 
 def _other_step(rec: dict[str, Any]) -> bool:
@@ -977,7 +995,7 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.time() - t0
     if n_run:
         log_invocation(out, n_run, wall, args.jobs, args.dt_factor, argv)
-    records = list(load_done(results).values())
+    records = [r for r in load_done(results).values() if not _before_cap(r)]
     if args.study:
         (out / "study_table.md").write_text(study_table(records))
     for c in candidates:

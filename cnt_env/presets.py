@@ -123,6 +123,19 @@ def graded_coarse(coarse_delta: float | None, delta_bar: float) -> float | None:
 #: used when ``--substrate`` swaps the preset's substrate.
 INITIAL_RADIUS: MappingProxyType[str, float] = MappingProxyType({"flat": 6.4, "stepped": 3.9})
 
+#: Step cap by substrate [choice]: the default step dt_factor Hbar (DepositionConfig) is
+#: held at dt_factor * cap above Hbar = cap. On the stepped substrate the error of the
+#: step grows with the step in absolute time, whatever Hbar: at Hbar 400 the steps 20, 10
+#: and 5 tau lay the irregular serpentine's A at 54.1, 57.9 and 59.6 (~first order, ~0.6%
+#: per tau), while at the baseline Hbar 155 (7.75 tau) halving the step moves A and
+#: lambda_x by <= 2.5%. So the cap is the serpentine's baseline Hbar: every stepped point
+#: runs at a step <= the baseline's. The flat substrate needs none (the coil's R0 at Hbar
+#: 400: 8.14, 8.12, 8.12 at 20, 10, 5 tau). None: no cap. RESULTS.md, issue 12, "a step
+#: bounded in absolute time".
+STEP_HBAR_CAP: MappingProxyType[str, float | None] = MappingProxyType(
+    {"flat": None, "stepped": 155.0}
+)
+
 #: Critical curvature kappa_c L_vb that turns steps on when a flat preset is run stepped.
 DEFAULT_KAPPA_C: float = PAPER_KAPPA_C_BAR
 

@@ -294,6 +294,7 @@ class RunSpec:
             "deposit_length": self.deposit_length,
             "dt": c.time_step,
             "dt_factor": None if c.dt is not None else c.dt_factor,
+            "dt_hbar_cap": None if c.dt is not None else c.step_hbar_cap,
             "drag_law": c.drag_law,
             "sliding": c.sliding,
             "coarse_delta": c.coarse_delta,

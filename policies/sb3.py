@@ -328,11 +328,25 @@ class SB3Policy:
 
 
 def algo_of(model_path: str | Path, algo: str | None = None) -> str:
+    """``algo`` if given, else the one the file name contains, else the ``run: algo`` of
+    the resolved config beside the model (``<name>.yml``, written by cnt-train)."""
+    model_path = Path(model_path)
     if algo is None:
-        algo = next((a for a in ALGOS if a in Path(model_path).name.lower()), None)
+        algo = next((a for a in ALGOS if a in model_path.name.lower()), None)
+    cfg_path = model_path.with_suffix(".yml")
+    if algo is None and cfg_path.is_file():
+        import yaml
+
+        try:
+            cfg = yaml.safe_load(cfg_path.read_text())
+        except yaml.YAMLError:
+            cfg = None
+        run = cfg.get("run") if isinstance(cfg, dict) else None
+        algo = run.get("algo") if isinstance(run, dict) else None
     if algo not in ALGOS:
-        raise ValueError(f"cannot tell the algorithm of {model_path} from its name; name it "
-                         f"with one of {ALGOS} (e.g. ppo.zip)")  # fmt: skip
+        raise ValueError(f"cannot tell the algorithm of {model_path}: neither its name nor "
+                         f"a 'run: algo:' in {cfg_path.name} beside it names one of {ALGOS}; "
+                         "pass the algorithm, or name the file with it (e.g. ppo.zip)")  # fmt: skip
     return algo
 
 

@@ -125,6 +125,32 @@ def test_si_input_with_kb_times_ten_gives_the_same_trace() -> None:
     np.testing.assert_allclose(traces[0], traces[1], atol=1e-6)
 
 
+def test_step_is_capped_in_absolute_time_on_the_stepped_substrate_only() -> None:
+    """dt = dt_factor min(Hbar, cap), the cap the substrate's (presets.STEP_HBAR_CAP: the
+    stepped substrate's baseline Hbar, none on the flat one); an explicit dt or number
+    overrides it, None is the uncapped rule. Below the cap the step is unchanged, so the
+    baseline points and the env's default stepped substrate keep their step."""
+    from cnt_env.presets import STEP_HBAR_CAP
+
+    cap = STEP_HBAR_CAP["stepped"]
+    assert cap is not None and STEP_HBAR_CAP["flat"] is None
+    serp = paper_groups("serpentine")
+    assert serp.Hbar <= cap  # the baseline runs at 0.05 Hbar, as before the cap
+    for hbar, want in ((0.5 * cap, 0.025 * cap), (cap, 0.05 * cap), (400.0, 0.05 * cap)):
+        cfg = DepositionConfig(params=paper_groups("serpentine", Hbar=hbar))
+        assert cfg.time_step == pytest.approx(want, rel=1e-12)
+        assert cfg.step_hbar_cap == cap
+    high = paper_groups("serpentine", Hbar=400.0)
+    assert DepositionConfig(params=high, dt_hbar_cap=None).time_step == pytest.approx(20.0)
+    assert DepositionConfig(params=high, dt_hbar_cap=200.0).time_step == pytest.approx(10.0)
+    assert DepositionConfig(params=high, dt=3.0).time_step == 3.0
+    coil = DepositionConfig(params=paper_groups("coil", Hbar=400.0))
+    assert coil.step_hbar_cap is None and coil.time_step == pytest.approx(20.0)
+    for bad in (0.0, -5.0, float("nan"), float("inf"), "always", True):
+        with pytest.raises(ValueError, match="dt_hbar_cap"):
+            DepositionConfig(params=high, dt_hbar_cap=bad)
+
+
 def test_bad_config_rejected_with_named_parameter() -> None:
     params = paper_groups("coil")
     with pytest.raises(ValueError, match="dt"):

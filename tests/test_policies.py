@@ -300,3 +300,20 @@ def test_route_follower_unhooks_away_from_the_steps_axis() -> None:
             assert turned == pytest.approx(phi + 0.5)
     turned = math.degrees(math.radians(66.0) + away.unhook_turn(math.radians(66.0)))
     assert turned == pytest.approx(66.0 - math.degrees(0.5))  # 66° -> 37°
+
+
+def test_algorithm_comes_from_the_name_else_the_config_beside_the_model(tmp_path) -> None:
+    """algo_of: an explicit algorithm, else the file name's, else ``run: algo`` of the
+    config beside the model (a run's best_model.zip with its yml); neither is a clear
+    error naming both places, raised before anything is loaded."""
+    from policies.sb3 import algo_of
+
+    assert algo_of(tmp_path / "ppo_residual.zip") == "ppo"
+    assert algo_of(tmp_path / "best_model.zip", "sac") == "sac"
+    with pytest.raises(ValueError, match=r"best_model\.yml"):
+        algo_of(tmp_path / "best_model.zip")
+    (tmp_path / "best_model.yml").write_text("CNTDeposit-v0: {}\nrun:\n  algo: sac\n")
+    assert algo_of(tmp_path / "best_model.zip") == "sac"
+    (tmp_path / "best_model.yml").write_text("run: [unclosed\n")  # corrupt: the same error
+    with pytest.raises(ValueError, match="pass the algorithm"):
+        algo_of(tmp_path / "best_model.zip")

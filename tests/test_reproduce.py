@@ -131,3 +131,29 @@ def test_default_keys_name_the_model_so_the_previous_default_is_never_reused() -
     cfg = dataclasses.replace(cfg, params=dataclasses.replace(cfg.params, delta_bar=1.0),
                               **legacy)  # fmt: skip
     assert reproduce._default_model_fields(cfg) == ""
+
+
+def test_capped_points_name_the_cap_and_uncapped_records_leave_the_tables() -> None:
+    """A stepped point above presets.STEP_HBAR_CAP runs at the capped step and its key says
+    so, so the uncapped record of the same point is never reused; such a record stays in
+    results.jsonl but out of the tables. Points at or below the cap, and coils, keep their
+    keys (their step did not change)."""
+    from cnt_env.presets import STEP_HBAR_CAP
+
+    cap = STEP_HBAR_CAP["stepped"]
+    table = reproduce.rows(False)
+    points = {(p["row"], tuple(sorted(p["groups"].items()))): p
+              for row in table.values() for p in row}  # fmt: skip
+    high = points[("Hbar", (("Hbar", 400.0),))]
+    low = points[("Hbar", (("Hbar", 100.0),))]
+    coil = points[("coil_groups", (("Hbar", 400.0),))]
+    assert f"|dtcap={cap:g}" in reproduce.point_key(high, "default", None)
+    assert f"|dtcap={cap:g}" in reproduce.point_key(high, "default", 0.025)
+    assert "|dtcap=" not in reproduce.point_key(low, "default", None)
+    assert "|dtcap=" not in reproduce.point_key(coil, "default", None)
+    assert reproduce.point_config(high, "default", None).time_step == pytest.approx(0.05 * cap)
+    old = {"key": "default|serpentine|Hbar=400|x", "Hbar": 400.0, "kappa_c_bar": 0.2}
+    assert reproduce._before_cap(old)
+    assert not reproduce._before_cap({**old, "key": old["key"] + "|dtcap=155"})
+    assert not reproduce._before_cap({**old, "Hbar": cap})
+    assert not reproduce._before_cap({**old, "kappa_c_bar": None})  # a coil: no cap

@@ -78,7 +78,8 @@ __all__ = ["ALL_POLICIES", "evaluate", "main"]
 
 ALL_POLICIES = ("random", "constant", "scripted", "ppo", "sac")
 #: Policies that need no model; any other name is a model ``<models>/<name>.zip`` whose
-#: name contains its algorithm (ppo.zip, sac.zip, ppo_residual.zip).
+#: name contains its algorithm (ppo.zip, sac.zip, ppo_residual.zip) or whose config beside
+#: it (``<name>.yml``, ``run: algo:``) names it.
 BASELINES = ("random", "constant", "scripted")
 TERMS = ("score", "coverage", "precision", "progress", "mean_distance")
 #: Grid of the constant-flow search: speeds (e_v / (mu H)) and number of directions. The

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
-from cnt_env.presets import MODEL, NEWTON
+from cnt_env.presets import MODEL, NEWTON, STEP_HBAR_CAP
 from cnt_env.sim.forces import (
     VDW_BETA0,
     VDW_CLAMP,
@@ -86,18 +86,23 @@ class DepositionConfig:
     lives. ``None`` keeps the rod uniform at ``delta_bar``; ``default_config``, ``cnt-sim``
     and the env take the graded rod of ``presets.MESH``. ``newton`` defaults to
     ``presets.NEWTON`` (residual 1e-5 e_v).
-    ``dt`` defaults to ``dt_factor * Hbar``: the time to deposit ``dt_factor`` L_vb at the
-    speed scale 1/Hbar, whatever delta (the dynamics near the contact are set by L_vb, not
-    by delta; touchdowns are located inside a step by the event search). ``initial_radius``
-    is R_i of the start-up contact arc; ``perturbation`` the seeded out-of-plane noise in
-    units of delta. ``max_nodes`` caps the solved rod: a configuration whose estimated
-    node count exceeds it is refused here, and a rod that grows past it while running (a
-    lost contact) raises SimulationError instead of exhausting memory.
+    ``dt`` defaults to ``dt_factor * min(Hbar, dt_hbar_cap)``: the time to deposit
+    ``dt_factor`` L_vb at the speed scale 1/Hbar, whatever delta (the dynamics near the
+    contact are set by L_vb, not by delta; touchdowns are located inside a step by the
+    event search), held at its value at Hbar = ``dt_hbar_cap`` above it. The cap defaults
+    to the substrate's ``presets.STEP_HBAR_CAP`` (155 stepped, none flat: on the stepped
+    substrate the step's error grows with the step in absolute time); None is no cap, the
+    rule of earlier rounds. ``initial_radius`` is R_i of the start-up contact arc;
+    ``perturbation`` the seeded out-of-plane noise in units of delta. ``max_nodes`` caps
+    the solved rod: a configuration whose estimated node count exceeds it is refused here,
+    and a rod that grows past it while running (a lost contact) raises SimulationError
+    instead of exhausting memory.
     """
 
     params: DimensionlessParams
     dt: float | None = None
     dt_factor: float = 0.05
+    dt_hbar_cap: float | str | None = "substrate"
     initial_radius: float = 6.4
     perturbation: float = 1e-3
     coarse_delta: float | None = None
@@ -118,6 +123,21 @@ class DepositionConfig:
             raise ValueError(f"dt must be finite and > 0, got {self.dt!r}")
         if not (math.isfinite(self.dt_factor) and self.dt_factor > 0):
             raise ValueError(f"dt_factor must be finite and > 0, got {self.dt_factor!r}")
+        cap = self.dt_hbar_cap
+        if not (
+            cap is None
+            or cap == "substrate"
+            or (
+                isinstance(cap, (int, float))
+                and not isinstance(cap, bool)
+                and math.isfinite(cap)
+                and cap > 0
+            )
+        ):
+            raise ValueError(
+                "dt_hbar_cap must be finite and > 0, None (no cap) or 'substrate' (the "
+                f"substrate's presets.STEP_HBAR_CAP), got {cap!r}"
+            )
         p = self.params
         if not (math.isfinite(self.initial_radius) and self.initial_radius > 2 * p.delta_bar):
             raise ValueError(
@@ -161,7 +181,17 @@ class DepositionConfig:
 
     @property
     def time_step(self) -> float:
-        return self.dt if self.dt is not None else self.dt_factor * self.params.Hbar
+        if self.dt is not None:
+            return self.dt
+        cap = self.step_hbar_cap
+        return self.dt_factor * (self.params.Hbar if cap is None else min(self.params.Hbar, cap))
+
+    @property
+    def step_hbar_cap(self) -> float | None:
+        """``dt_hbar_cap`` resolved: the substrate's ``presets.STEP_HBAR_CAP`` by default."""
+        if self.dt_hbar_cap == "substrate":
+            return STEP_HBAR_CAP["flat" if self.params.kappa_c_bar is None else "stepped"]
+        return self.dt_hbar_cap
 
     def with_params(self, **changes: float) -> DepositionConfig:
         return replace(self, params=replace(self.params, **changes))
