@@ -126,7 +126,7 @@ INITIAL_RADIUS: MappingProxyType[str, float] = MappingProxyType({"flat": 6.4, "s
 #: Step cap by substrate [choice]: the default step dt_factor Hbar (DepositionConfig) is
 #: held at dt_factor * cap above Hbar = cap. On the stepped substrate the error of the
 #: step grows with the step in absolute time, whatever Hbar: at Hbar 400 the steps 20, 10
-#: and 5 tau lay the irregular serpentine's A at 54.1, 57.9 and 59.6 (~first order, ~0.6%
+#: and 5 tau lay the irregular serpentine's A at 54.1, 57.9 and 59.6 (~first order, ~0.5%
 #: per tau), while at the baseline Hbar 155 (7.75 tau) halving the step moves A and
 #: lambda_x by <= 2.5%. So the cap is the serpentine's baseline Hbar: every stepped point
 #: runs at a step <= the baseline's. The flat substrate needs none (the coil's R0 at Hbar

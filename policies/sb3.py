@@ -327,18 +327,29 @@ class SB3Policy:
         return a
 
 
+def model_config(model_path: Path) -> Any:
+    """The resolved config beside a model (``<name>.yml``, written by cnt-train), parsed
+    with ``yaml.safe_load``; {} without one (or an empty one)."""
+    path = model_path.with_suffix(".yml")
+    if not path.is_file():
+        return {}
+    import yaml
+
+    return yaml.safe_load(path.read_text()) or {}
+
+
 def algo_of(model_path: str | Path, algo: str | None = None) -> str:
     """``algo`` if given, else the one the file name contains, else the ``run: algo`` of
-    the resolved config beside the model (``<name>.yml``, written by cnt-train)."""
+    the resolved config beside the model (:func:`model_config`)."""
     model_path = Path(model_path)
+    cfg_path = model_path.with_suffix(".yml")
     if algo is None:
         algo = next((a for a in ALGOS if a in model_path.name.lower()), None)
-    cfg_path = model_path.with_suffix(".yml")
-    if algo is None and cfg_path.is_file():
+    if algo is None:
         import yaml
 
         try:
-            cfg = yaml.safe_load(cfg_path.read_text())
+            cfg = model_config(model_path)
         except yaml.YAMLError:
             cfg = None
         run = cfg.get("run") if isinstance(cfg, dict) else None
@@ -407,9 +418,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
     base, scale, n_stack, observe_base = None, 0.0, 1, False
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
-        import yaml
-
-        cfg = yaml.safe_load(cfg_path.read_text()) or {}
+        cfg = model_config(model_path)
         entry = cfg.get("CNTDeposit-v0") or {}
         n_stack = frame_stack(entry)
         residual = residual_settings(entry)

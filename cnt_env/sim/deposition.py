@@ -190,7 +190,7 @@ class DepositionConfig:
     def step_hbar_cap(self) -> float | None:
         """``dt_hbar_cap`` resolved: the substrate's ``presets.STEP_HBAR_CAP`` by default."""
         if self.dt_hbar_cap == "substrate":
-            return STEP_HBAR_CAP["flat" if self.params.kappa_c_bar is None else "stepped"]
+            return STEP_HBAR_CAP["stepped" if self.params.is_stepped else "flat"]
         return self.dt_hbar_cap
 
     def with_params(self, **changes: float) -> DepositionConfig:
