@@ -31,3 +31,19 @@ def test_a_case_cached_with_other_settings_is_run_again(capsys) -> None:
     old_default = _cached("serpentine", "default", 1500.0, 150.0)
     del old_default["vbar"]
     assert v._same_settings(args, "default", old_default, quiet=True)
+
+
+def test_cases_run_with_the_models_newton_options(capsys) -> None:
+    """A case solves as the model does (presets.NEWTON: residual 1e-5, length projection,
+    edge-rotation check, lagged Jacobian), not with the stepper's generic Newton; a
+    record cached before those options were recorded is run again."""
+    from cnt_env.sim.deposition import DepositionConfig
+
+    for suite, name in (("coil", "default"), ("serpentine", "default"), ("serpentine", "dt_half")):
+        case = v.case_config(suite, name)
+        assert case.newton == DepositionConfig(params=case.params).newton
+    args = argparse.Namespace(suite="serpentine", deposit=1500.0, transient=150.0)
+    fresh = _cached("serpentine", "default", 1500.0, 150.0)
+    before = {k: x for k, x in fresh.items() if k not in ("length_projection", "lagged_jacobian")}
+    assert not v._same_settings(args, "default", before)
+    assert "length_projection" in capsys.readouterr().out
