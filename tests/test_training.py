@@ -434,7 +434,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     configs and the pretrained models' configs pin the fast surrogate
     (presets.SURROGATE: the printed drag law at delta_bar 1), and the evaluation config
     (training/configs/eval.yml, cnt-evaluate's default) keeps the env's default physics,
-    the model (presets.MODEL on presets.MESH's delta_bar)."""
+    the model (presets.MODEL on presets.MESH's delta_bar). One probe,
+    ppo_residual_linear.yml, trains on the linear law at delta_bar 1."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
@@ -451,6 +452,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
         try:
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
-            assert physics == (model if path.name == "eval.yml" else surrogate), path.name
+            expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0)}
+            assert physics == expected.get(path.name, surrogate), path.name
         finally:
             env.close()
