@@ -136,13 +136,18 @@ COIL_CASES: dict[str, dict] = {
 }
 
 
-def case_config(suite: str, name: str) -> DepositionConfig:
-    """The DepositionConfig of case ``name``: the suite's defaults with its overrides."""
+def case_settings(suite: str, name: str) -> dict:
+    """The settings of case ``name``: the suite's defaults with the case's overrides (what
+    run_case records and the cache is compared on)."""
+    return {**_suite_defaults()[suite], **CASES[suite][name]}
+
+
+def case_config(suite: str, c: dict) -> DepositionConfig:
+    """The DepositionConfig of a case's settings ``c`` (:func:`case_settings`)."""
     from cnt_env.sim.deposition import DepositionConfig
     from cnt_env.sim.stepper import NewtonOptions
     from cnt_env.units import paper_groups
 
-    c = {**_suite_defaults()[suite], **CASES[suite][name]}
     groups = {"delta_bar": c["delta_bar"]}
     extra = {}
     if suite == "serpentine":
@@ -163,8 +168,8 @@ def run_case(suite: str, name: str, deposit: float, transient: float) -> dict:
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.sim.deposition import DepositionSim
 
-    c = {**_suite_defaults()[suite], **CASES[suite][name]}
-    config = case_config(suite, name)
+    c = case_settings(suite, name)
+    config = case_config(suite, c)
     sim = DepositionSim(config, seed=0)
     t0 = time.perf_counter()
     sim.run(transient)
@@ -239,8 +244,8 @@ def _same_settings(args: argparse.Namespace, name: str, cached: dict | None,
     defaults with the case's overrides, the same deposit and transient."""
     if cached is None:
         return False
-    now = {**_suite_defaults()[args.suite], **CASES[args.suite][name],
-           "deposit": args.deposit, "transient": args.transient}  # fmt: skip
+    now = {**case_settings(args.suite, name), "deposit": args.deposit,
+           "transient": args.transient}  # fmt: skip
     stale = {k for k, v in now.items() if cached.get(k, None if v is None else "?") != v}
     if stale and not quiet:
         print(f"{name}: cached with other settings ({', '.join(sorted(stale))}), run again")

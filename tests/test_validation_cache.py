@@ -9,8 +9,8 @@ from benchmarks import validation as v  # the repo root is on pytest's pythonpat
 
 def _cached(suite: str, name: str, deposit: float, transient: float) -> dict:
     """What run_case records about its settings, for the current defaults."""
-    return {**v._suite_defaults()[suite], **v.CASES[suite][name],
-            "deposit": deposit, "transient": transient, "amplitude": 30.0}  # fmt: skip
+    return {**v.case_settings(suite, name), "deposit": deposit, "transient": transient,
+            "amplitude": 30.0}  # fmt: skip
 
 
 def test_a_case_cached_with_other_settings_is_run_again(capsys) -> None:
@@ -40,7 +40,7 @@ def test_cases_run_with_the_models_newton_options(capsys) -> None:
     from cnt_env.sim.deposition import DepositionConfig
 
     for suite, name in (("coil", "default"), ("serpentine", "default"), ("serpentine", "dt_half")):
-        case = v.case_config(suite, name)
+        case = v.case_config(suite, v.case_settings(suite, name))
         assert case.newton == DepositionConfig(params=case.params).newton
     args = argparse.Namespace(suite="serpentine", deposit=1500.0, transient=150.0)
     fresh = _cached("serpentine", "default", 1500.0, 150.0)
