@@ -20,6 +20,12 @@ line). Without the route it uses the window's mean. Then:
   drift of the last step: the rod answers a new flow about one control step late
   (docs/task.md), and a follower steering the centre it sees overshoots the corners
   (a run along the steps drifts ~17 L_vb per step) into the keep-out beyond them;
+* a run along the steps is steered by its contact point (``run_centre``, default 1):
+  after that many flows within 30° of the same one of ±z the pen lays an almost straight
+  run, whose windows span its length, so their midpoint lags the contact by half of it
+  (~45 L_vb on a detour's first leg: the flow stayed along the steps past the corner and
+  the run entered the keep-out beyond it). The flow given tells a run, not the trace: a
+  band's first swing passes a trace test (a probe of that scored 0.145 on 8 detours);
 * the flow points from the centre to the aim, plus ``gain`` times the centre's offset
   across the route (back toward the route's line, which the drift alone corrects slowly);
 * keep-outs (a short circuit zeroes the score after 20 nodes): with the route known
@@ -89,6 +95,14 @@ and command, ``--variant 'unhook_away={"unhook_away": true}'``): mean **0.857** 
 out it scores 0.913 on seeds 0-2 (u_turn 0.838 -> 0.885, staircase3 0.851 -> 0.956,
 arc_quarter 0.852 -> 0.949, the rest within 0.03) and 0.905 over seeds 0-8 (0.866
 counter-clockwise), and completes all 81 episodes.
+The run centre (study "2026-11-27 run centre", same file and command, ``--variant
+'run1={"run_centre": 1}'``): mean **0.943** at 1 against 0.857 without it (0), 0.892 at
+2 and 0.923 at 3 (detour 0.205 -> 0.787; pads 0.923 -> 0.968, staircase 0.954 -> 0.978,
+the rest within 0.02); on 8 detours (seeds 0-7) at 2, 0.536 against 0.453. On 12
+validation routes of the model (``benchmarks/checkpoint_selection.py``) 0.889 against
+0.805, a detour the follower shorted going from 0.000 to 0.827. Held out, seeds 0-8, it
+gains less: 0.912 against 0.905 (u_turn 0.876 -> 0.935, against_flow 0.888 -> 0.909,
+diagonal 0.982 -> 0.962, detour_block 0.611 -> 0.622).
 """
 
 from __future__ import annotations
@@ -132,6 +146,7 @@ class RouteFollower:
         unhook: float = 0.5,
         hook_tol: float = 2.0,
         unhook_away: bool = True,
+        run_centre: int = 1,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -162,6 +177,11 @@ class RouteFollower:
             raise ValueError(f"hook_tol must be >= 0 L_vb, got {hook_tol!r}")
         self.hook_tol = float(hook_tol)
         self.unhook_away = bool(unhook_away)
+        if int(run_centre) < 0:
+            raise ValueError(f"run_centre must be >= 0 control steps, got {run_centre!r}")
+        self.run_centre = int(run_centre)
+        self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))  # last flows
+        self._run = False  # whether the centre is a run's (its contact point)
         self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
         self._prev_phi: float | None = None  # the flow direction of the last action
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
@@ -199,6 +219,8 @@ class RouteFollower:
             self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
             self._prev_centre = self._prev_contact = self._prev_phi = None
+            self._phis.clear()
+            self._run = False
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
         self._s_next = min(float(o[self.slices["progress"].start]) * s[-1] + self.spacing, s[-1])
@@ -279,6 +301,29 @@ class RouteFollower:
         seen = np.concatenate(self._windows)
         return 0.5 * (seen.max(axis=0) + seen.min(axis=0)) - contact
 
+    def run_centre_or(self, centre: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
+        """The centre to steer: the contact point (zeros) while the pen lays a run along
+        the steps (:meth:`laying_run`), else ``centre`` (the band's centre line). A run's
+        windows span its length, so their midpoint lags its contact by half of it (~45
+        L_vb on a detour's first leg, where the follower steered past the corner into the
+        keep-out). Needs the route (``contact``, its frame). On a switch the centre
+        jumps, so the next prediction (:meth:`predicted_centre`) has no drift to add."""
+        run = contact is not None and self.laying_run()
+        if run != self._run:
+            self._run, self._prev_centre = run, None
+        return np.zeros(2) if run else centre
+
+    def laying_run(self) -> bool:
+        """Whether the pen lays a run along the steps, told by the flow it was given, not
+        by the trace (a band's first swing looks like a run): the last ``run_centre``
+        flows all within 30° of the same one of ±z (a flow along the steps lays an almost
+        straight run, module doc). ``run_centre`` 0: never."""
+        if self.run_centre == 0 or len(self._phis) < self.run_centre:
+            return False
+        f_z = [math.sin(p) for p in self._phis]
+        along = math.cos(math.radians(30.0))
+        return all(f >= along for f in f_z) or all(f <= -along for f in f_z)
+
     def predicted_centre(self, centre: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
         """Where the centre will be ``lead`` control steps on, at the drift of the last
         step (centre + lead x its last displacement): the rod answers a new flow about
@@ -327,9 +372,12 @@ class RouteFollower:
         route = o[self.slices["route"]]
         width, keep = float(route[0]), route[1:3]
         contact = self.contact_on_route(o, ahead)
-        centre = self.predicted_centre(self.pattern_centre(past, contact), contact)
+        band = self.pattern_centre(past, contact)
+        centre = self.predicted_centre(self.run_centre_or(band, contact), contact)
         vbar = self.speed_for(width)
-        half = self.band_half_widths(past, centre, vbar)
+        # the band's extent is measured about its centre line, a run's too: about the
+        # contact point a run's spread is its length, which would push the plan far out
+        half = self.band_half_widths(past, band if self._run else centre, vbar)
         planned = self.planned_ahead(contact, len(ahead), half)
         if planned is not None:
             ahead = planned
@@ -354,6 +402,7 @@ class RouteFollower:
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
         self._prev_phi = phi
+        self._phis.append(phi)
         return action_from_flow(vbar, phi, self.vbar_max)
 
 
@@ -361,7 +410,7 @@ class RouteFollower:
 RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
-RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False}
+RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0}
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

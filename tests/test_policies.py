@@ -244,6 +244,44 @@ def test_route_follower_leads_the_centre_by_its_last_displacement() -> None:
             RouteFollower(layout.slices, 0.13, lead=bad)
 
 
+def test_route_follower_steers_a_run_by_its_contact_point() -> None:
+    """``run_centre``: after that many flows within 30° of the same one of ±z the pen
+    lays a run, whose centre is its contact point (zeros), not the midpoint of the
+    windows; a flow across or diagonal to the steps, flows of both signs, too few flows,
+    no route, or ``run_centre`` 0 keep the band's centre. A switch clears the drift the
+    next prediction would add."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    slices = ObservationLayout(4, 4, (2.0,), route=True).slices
+    band = np.array([-3.0, 12.0])
+    contact = np.array([5.0, 40.0])
+
+    def steered(phis: list[float], run_centre: int = 2, at=contact) -> np.ndarray:
+        pol = RouteFollower(slices, 0.13, run_centre=run_centre)
+        pol._phis.extend(phis)
+        return pol.run_centre_or(band, at)
+
+    up, down = math.pi / 2, -math.pi / 2
+    assert steered([up, up]) == pytest.approx([0.0, 0.0])
+    assert steered([down, down + math.radians(25.0)]) == pytest.approx([0.0, 0.0])
+    assert steered([up, up], run_centre=1) == pytest.approx([0.0, 0.0])
+    assert steered([up]) == pytest.approx(band)  # one flow of the two
+    assert steered([up, down]) == pytest.approx(band)  # both signs: a swing, not a run
+    assert steered([up, math.radians(55.0)]) == pytest.approx(band)  # 35° off the steps
+    assert steered([0.0, 0.0]) == pytest.approx(band)  # across the steps: a band
+    assert steered([up, up], at=None) == pytest.approx(band)  # no route
+    assert steered([up, up], run_centre=0) == pytest.approx(band)
+    # the switch: the centre jumps from the band's line to the contact, no drift added
+    pol = RouteFollower(slices, 0.13, run_centre=1, lead=1.0)
+    pol.predicted_centre(pol.run_centre_or(band, contact), contact)
+    pol._phis.append(up)
+    got = pol.predicted_centre(pol.run_centre_or(band, contact), contact + np.array([0.0, 17.0]))
+    assert got == pytest.approx([0.0, 0.0])
+    with pytest.raises(ValueError, match="run_centre"):
+        RouteFollower(slices, 0.13, run_centre=-1)
+
+
 def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
     """``hooked``: the last flow within 30° of the steps (±z) and the contact ran along
     them against it by more than ``hook_tol``; then the flow turns ``unhook`` off the
