@@ -180,10 +180,10 @@ class RouteFollower:
         if int(run_centre) < 0:
             raise ValueError(f"run_centre must be >= 0 control steps, got {run_centre!r}")
         self.run_centre = int(run_centre)
-        self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))  # last flows
+        # the directions of the last flows given (at least the last one, for ``hooked``)
+        self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))
         self._run = False  # whether the centre is a run's (its contact point)
         self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
-        self._prev_phi: float | None = None  # the flow direction of the last action
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
         self._env = None  # set by from_env: where the route (and its keep-outs) comes from
         self._route = None  # the route of the state below (cleared when it changes)
@@ -218,7 +218,7 @@ class RouteFollower:
         if route is not self._route:
             self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
-            self._prev_centre = self._prev_contact = self._prev_phi = None
+            self._prev_centre = self._prev_contact = None
             self._phis.clear()
             self._run = False
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
@@ -348,9 +348,9 @@ class RouteFollower:
         if contact is None or self.unhook == 0.0:
             return False
         prev, self._prev_contact = self._prev_contact, contact.copy()
-        if prev is None or self._prev_phi is None:
+        if prev is None or not self._phis:
             return False
-        f_z = math.sin(self._prev_phi)
+        f_z = math.sin(self._phis[-1])  # the last flow
         dx, dz = contact - prev
         return (abs(f_z) >= math.cos(math.radians(30.0)) and abs(dx) <= 0.5 * abs(dz)
                 and dz * math.copysign(1.0, f_z) < -self.hook_tol)  # fmt: skip
@@ -401,7 +401,6 @@ class RouteFollower:
         phi = math.atan2(aim[1], aim[0])
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
-        self._prev_phi = phi
         self._phis.append(phi)
         return action_from_flow(vbar, phi, self.vbar_max)
 

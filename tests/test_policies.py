@@ -295,7 +295,7 @@ def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
 
     def after(step: list[float], phi: float = math.pi / 2, **kw) -> bool:
         pol = RouteFollower(layout.slices, 0.13, **kw)
-        pol._prev_phi = phi  # the last flow (default: along +z)
+        pol._phis.append(phi)  # the last flow (default: along +z)
         assert not pol.hooked(np.array([5.0, 10.0]))  # the first contact: nothing to compare
         return pol.hooked(np.array([5.0, 10.0]) + np.array(step))
 
