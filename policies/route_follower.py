@@ -320,9 +320,8 @@ class RouteFollower:
         straight run, module doc). ``run_centre`` 0: never."""
         if self.run_centre == 0 or len(self._phis) < self.run_centre:
             return False
-        f_z = [math.sin(p) for p in self._phis]
-        along = math.cos(math.radians(30.0))
-        return all(f >= along for f in f_z) or all(f <= -along for f in f_z)
+        signs = {steps_sign(p) for p in self._phis}
+        return len(signs) == 1 and 0 not in signs
 
     def predicted_centre(self, centre: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
         """Where the centre will be ``lead`` control steps on, at the drift of the last
@@ -350,10 +349,9 @@ class RouteFollower:
         prev, self._prev_contact = self._prev_contact, contact.copy()
         if prev is None or not self._phis:
             return False
-        f_z = math.sin(self._phis[-1])  # the last flow
+        sign = steps_sign(self._phis[-1])  # the last flow
         dx, dz = contact - prev
-        return (abs(f_z) >= math.cos(math.radians(30.0)) and abs(dx) <= 0.5 * abs(dz)
-                and dz * math.copysign(1.0, f_z) < -self.hook_tol)  # fmt: skip
+        return sign != 0 and abs(dx) <= 0.5 * abs(dz) and dz * sign < -self.hook_tol
 
     def unhook_turn(self, phi: float) -> float:
         """The turn of a hooked flow ``phi``: ``unhook`` counter-clockwise, or with
@@ -410,6 +408,18 @@ RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
 RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0}
+
+
+#: |sin phi| of a flow 30° off the steps' axis (±z)
+_ALONG_STEPS = math.cos(math.radians(30.0))
+
+
+def steps_sign(phi: float) -> int:
+    """+1 / -1 for a flow ``phi`` within 30° of +z / -z (along the steps), else 0: the
+    flows that lay a run (:meth:`RouteFollower.laying_run`) or can hook one
+    (:meth:`RouteFollower.hooked`)."""
+    f_z = math.sin(phi)
+    return int(math.copysign(1.0, f_z)) if abs(f_z) >= _ALONG_STEPS else 0
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

@@ -446,13 +446,13 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     surrogate = (SURROGATE["drag_law"], SURROGATE["delta_bar"])
     model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
     assert surrogate != model
+    expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0)}
     for path in configs:
         env_kwargs, steps = env_settings(load_config(path))
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
         try:
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
-            expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0)}
             assert physics == expected.get(path.name, surrogate), path.name
         finally:
             env.close()
