@@ -173,7 +173,8 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(sim_options={"no_such_option": 1}), dict(sim_options={"newton": {"tol": 1e-5}}),
      dict(tolerance="wide"), dict(vbar_max=True),
      dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
-     dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324)],
+     dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324),
+     dict(flow_gain=0.0), dict(flow_gain=math.nan), dict(vbar=0.3, flow_gain=2.0)],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
@@ -274,6 +275,28 @@ def test_same_seed_same_actions_are_bit_identical(kw: dict) -> None:
     c = make(kw)
     rc = rollout(c, acts, seed=43)
     assert not np.array_equal(ra[-1][0], rc[-1][0])
+
+
+def test_flow_gain_scales_the_simulated_flow_only(kw: dict) -> None:
+    """flow_gain g: the simulator runs g x the commanded flow, and nothing else changes.
+    With powers of two every product is exact, so g = 2 under vbar_max 0.125 is, bit for
+    bit, the env of vbar_max 0.25: an action commands half the speed and the simulator
+    runs the same flow; the observed flow is normalised by vbar_max either way. Only
+    info's flow_vbar (the commanded speed) differs."""
+    acts = actions(4, 8)
+    gained, wide = make(kw, flow_gain=2.0, vbar_max=0.125), make(kw, vbar_max=0.25)
+    ra, rb = rollout(gained, acts, seed=5), rollout(wide, acts, seed=5)
+    for i, (sa, sb) in enumerate(zip(ra, rb, strict=True)):
+        if len(sa) == 2:
+            assert_same(sa[0], sb[0], f"reset {i} obs")
+            continue
+        assert_same(sa[:4], sb[:4], f"step {i}")
+        ia, ib = dict(sa[4]), dict(sb[4])
+        assert 2.0 * ia.pop("flow_vbar") == ib.pop("flow_vbar") > 0.0
+        assert_same(ia, ib, f"step {i} info")
+    np.testing.assert_array_equal(gained.unwrapped.sim.rod.flow, wide.unwrapped.sim.rod.flow)
+    # the warm start's vbar is the simulated flow: up to vbar_max x flow_gain
+    assert CNTDepositEnv(**{**SMALL, "vbar": 0.2, "flow_gain": 2.0}).params.vbar == 0.2
 
 
 def test_pickled_env_continues_identically(kw: dict) -> None:

@@ -434,8 +434,10 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     configs and the pretrained models' configs pin the fast surrogate
     (presets.SURROGATE: the printed drag law at delta_bar 1), and the evaluation config
     (training/configs/eval.yml, cnt-evaluate's default) keeps the env's default physics,
-    the model (presets.MODEL on presets.MESH's delta_bar). One probe,
-    ppo_residual_linear.yml, trains on the linear law at delta_bar 1."""
+    the model (presets.MODEL on presets.MESH's delta_bar). Two probes:
+    ppo_residual_linear.yml trains on the linear law at delta_bar 1, and
+    ppo_residual_calibrated.yml on the surrogate calibrated to the model's kinematics
+    (its flow x 1.44, a control step of 99 physics steps instead of 150)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
@@ -454,5 +456,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(path.name, surrogate), path.name
+            if path.name == "ppo_residual_calibrated.yml":
+                assert (base.flow_gain, base.n_substeps) == (1.44, 99)
+            else:
+                assert base.flow_gain == 1.0, path.name
         finally:
             env.close()

@@ -206,7 +206,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `Hbar`, `Ibar`     | preset's     | rod height (L_vb), mass per length              |
     | `kappa_c_bar`      | 0.2          | critical curvature (stepped only; 1/L_vb)       |
     | `delta_bar`        | 0.2          | discretisation length (L_vb; presets.MESH)      |
-    | `vbar`, `phi`      | preset's     | warm-start flow: speed <= vbar_max, angle (rad) |
+    | `vbar`, `phi`      | preset's     | warm-start flow (simulated): speed, angle (rad) |
     | `physics`          | None         | other DimensionlessParams fields (dict)         |
     | `dt`               | 0.2/0.1 H̄    | stepped/flat time step (tau); ENV_SIM_DEFAULTS  |
     | `coarse_delta`     | 6.0          | graded mesh (DepositionConfig); ENV_MESH        |
@@ -214,6 +214,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `drag_law`         | "linear"     | "linear" or "printed" (presets.MODEL)           |
     | `sim_options`      | None         | other DepositionConfig fields (dict)            |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
+    | `flow_gain`        | 1.0          | simulated / commanded flow speed (calibrates a  |
+    |                    |              | surrogate's kinematics to the model's)          |
     | `control_interval` | 12 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
     | `warmup_length`    | H̄            | trace laid to reach the warm state (L_vb)       |
     | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
@@ -293,6 +295,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         drag_law: str = MODEL["drag_law"],
         sim_options: Mapping[str, Any] | None = None,
         vbar_max: float = DEFAULT_VBAR_MAX,
+        flow_gain: float = 1.0,
         control_interval: float | None = None,
         warmup_length: float | None = None,
         warmup_seed: int = 0,
@@ -330,8 +333,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             sim_options, dt=dt, coarse_delta=coarse_delta, initial_radius=initial_radius,
         )  # fmt: skip
         self.vbar_max = s.positive("vbar_max", vbar_max)
-        if self.params.vbar > self.vbar_max:
-            raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max = {self.vbar_max}")
+        self.flow_gain = s.positive("flow_gain", flow_gain)
+        if self.params.vbar > self.vbar_max * self.flow_gain:
+            raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max x flow_gain = "
+                             f"{self.vbar_max * self.flow_gain}")  # fmt: skip
         self.dt = self.config.time_step
         self.score_mode = s.choice("score", score, SCORES)
         self.control_interval, self.n_substeps = self._substeps(control_interval)
@@ -457,7 +462,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             except SimulationError:
                 sim.restore(unflatten_snapshot(self._warm))  # start from the warm state itself
                 advance = 0.0
-        self._flow = (self.params.vbar, self.params.phi)
+        self._flow = (self.params.vbar / self.flow_gain, self.params.phi)  # as commanded
         self._begin_episode(target)
         trace = sim.trace()
         metrics = self._last_metrics = self._metrics(trace)
@@ -527,7 +532,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._flow = flow_from_action(np.clip(a, -1.0, 1.0), self.vbar_max)
         before = sim.stats()
         try:
-            sim.set_flow(*self._flow)
+            sim.set_flow(self.flow_gain * self._flow[0], self._flow[1])
             sim.advance(self.control_interval)
         except SimulationError as exc:
             self._failure = str(exc.reason)
