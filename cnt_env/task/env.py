@@ -216,7 +216,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
     | `flow_gain`        | 1.0          | simulated / commanded flow speed (calibrates a  |
     |                    |              | surrogate's kinematics to the model's)          |
-    | `control_interval` | 12 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
+    | `control_interval` | 30 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
     | `warmup_length`    | H̄            | trace laid to reach the warm state (L_vb)       |
     | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
     | `reset_advance`    | 4.0          | max random advance at reset (control intervals) |
