@@ -37,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _episode(job: tuple) -> dict:
     from policies import RouteFollower
     from training.common import env_settings, limit_threads, load_config, make_env
+    from training.evaluate import _play
 
     variant, options, family, seed, config = job
     limit_threads()
@@ -47,12 +48,7 @@ def _episode(job: tuple) -> dict:
         t0 = time.perf_counter()
         obs, _ = env.reset(seed=seed, options={"target": family})
         policy.reset(seed)
-        steps = 0
-        while True:
-            obs, _, terminated, truncated, info = env.step(policy.act(obs))
-            steps += 1
-            if terminated or truncated:
-                break
+        steps, _, info = _play(env, policy, obs)
         return {"variant": variant, "options": options, "family": family, "seed": seed,
                 **{k: float(info[k]) for k in ("score", "precision", "progress")},
                 "shorts": int(info["shorts"]), "steps": steps,

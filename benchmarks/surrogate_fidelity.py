@@ -45,6 +45,7 @@ def _episode(job: tuple[dict, int]) -> dict:
     from cnt_env.task.env import CNTDepositEnv
     from policies import RouteFollower
     from training.common import VALIDATION_SEED0, limit_threads
+    from training.evaluate import _play
 
     kwargs, i = job
     limit_threads()
@@ -52,12 +53,8 @@ def _episode(job: tuple[dict, int]) -> dict:
     policy = RouteFollower.from_env(env)
     obs, _ = env.reset(seed=VALIDATION_SEED0 + i)
     policy.reset(i)
-    t0, steps = time.process_time(), 0
-    while True:
-        obs, _, terminated, truncated, info = env.step(policy.act(obs))
-        steps += 1
-        if terminated or truncated:
-            break
+    t0 = time.process_time()
+    steps, _, info = _play(env, policy, obs)
     return {"route": i, "family": env.target.name, "score": float(info["score"]),
             "steps": steps, "laid": float(info["laid_length"]),
             "cpu_s": time.process_time() - t0}  # fmt: skip
