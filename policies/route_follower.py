@@ -103,6 +103,23 @@ validation routes of the model (``benchmarks/checkpoint_selection.py``) 0.889 ag
 0.805, a detour the follower shorted going from 0.000 to 0.827. Held out, seeds 0-8, it
 gains less: 0.912 against 0.905 (u_turn 0.876 -> 0.935, against_flow 0.888 -> 0.909,
 diagonal 0.982 -> 0.962, detour_block 0.611 -> 0.622).
+The plan's band (study "2026-11-27 recent band", same file and command, detour family
+only: the plan acts only where there are keep-outs). The plan keeps clear of the widest
+band seen on the route (``band_memory`` 0). That is often wider than the band passing the
+keep-out: on detour_block (a held-out route, where this was noticed) the first swings
+from the warm start reach 30-41 L_vb across the steps, against ~20 once the band has
+formed, and the plan holds the whole top leg ~26 L_vb outside the route. A plan for the
+widest band of the last n control steps (``band_memory`` n) lays the detours it
+completes more precisely (seeds 0-7: 0.88 at n = 4 against 0.78), but a run along the
+steps overshoots a nearer corner and irregular swings reach past a recent band's width,
+so it shorts more of them: mean 0.551 / 0.525 / 0.502 at n = 4 / 8 / 16 (3 of 8 shorted
+each) against **0.684** at 0 (1 of 8). Leading a run's centre further (``run_lead``, in
+control steps; None: ``lead``) with n = 4 gives 0.551 at 2 and 0.729 at 3, but over
+seeds 8-15 0.662 against 0.751 at the defaults: over 16 seeds 0.695 (3 shorted; 0.856
+on the rest) against **0.717** (1 shorted; 0.765). The widest band is a safety margin
+against the short, which zeroes a route; the defaults stay. (A probe that forgot only
+the first 8 or 12 control steps' band scored 0.587 and 0.506 on seeds 0-7 and was
+dropped.)
 """
 
 from __future__ import annotations
@@ -147,6 +164,8 @@ class RouteFollower:
         hook_tol: float = 2.0,
         unhook_away: bool = True,
         run_centre: int = 1,
+        band_memory: int = 0,
+        run_lead: float | None = None,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -170,6 +189,9 @@ class RouteFollower:
         if not (math.isfinite(lead) and lead >= 0.0):
             raise ValueError(f"lead must be >= 0 control steps, got {lead!r}")
         self.lead = float(lead)
+        if run_lead is not None and not (math.isfinite(run_lead) and run_lead >= 0.0):
+            raise ValueError(f"run_lead must be >= 0 control steps or None, got {run_lead!r}")
+        self.run_lead = None if run_lead is None else float(run_lead)
         if not (math.isfinite(unhook) and abs(unhook) <= math.pi / 2):
             raise ValueError(f"unhook must be an angle in [-pi/2, pi/2] rad, got {unhook!r}")
         self.unhook = float(unhook)
@@ -180,6 +202,11 @@ class RouteFollower:
         if int(run_centre) < 0:
             raise ValueError(f"run_centre must be >= 0 control steps, got {run_centre!r}")
         self.run_centre = int(run_centre)
+        if int(band_memory) < 0:
+            raise ValueError(f"band_memory must be >= 0 control steps, got {band_memory!r}")
+        self.band_memory = int(band_memory)
+        # the band's half-extents of the last ``band_memory`` control steps (plan_band)
+        self._bands: deque[np.ndarray] = deque(maxlen=max(1, self.band_memory))
         # the directions of the last flows given (at least the last one, for ``hooked``)
         self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))
         self._run = False  # whether the centre is a run's (its contact point)
@@ -188,7 +215,7 @@ class RouteFollower:
         self._env = None  # set by from_env: where the route (and its keep-outs) comes from
         self._route = None  # the route of the state below (cleared when it changes)
         self._route_pts = self._route_s = None
-        self._half = np.zeros(2)  # the band's widest half-extents on this route
+        self._half = np.zeros(2)  # the band's half-extents the plan is for (plan_band)
         self._planned: np.ndarray | None = None  # the route planned for ``_half``
         self._windows: deque[np.ndarray] = deque(maxlen=max(1, self.memory))
         self._s_next = 0.0  # arc length of the observation's first route point
@@ -218,6 +245,7 @@ class RouteFollower:
         if route is not self._route:
             self._route, self._half, self._planned = route, np.zeros(2), None
             self._windows.clear()
+            self._bands.clear()
             self._prev_centre = self._prev_contact = None
             self._phis.clear()
             self._run = False
@@ -251,11 +279,9 @@ class RouteFollower:
         if not self.plan or contact is None or not self._route.keepouts:
             return None
         pts, s = self._route_pts, self._route_s
-        # the band only widens the plan (its widest so far): a plan that breathes with
-        # each period's spread would steer the centre up and down with it; so it is
-        # redone only when the band has widened
-        if self._planned is None or np.any(half > self._half):
-            self._half = np.maximum(self._half, half)
+        band = self.plan_band(half)
+        if self._planned is None or np.any(band != self._half):
+            self._half = band
             self._planned = plan_around(pts, self._route.keepouts, self._half + self.clearance)
         planned = self._planned
         # from ``behind`` before the furthest point: the progress runs ahead of the
@@ -263,6 +289,21 @@ class RouteFollower:
         s_at = np.clip(self._s_next - self.behind + self.spacing * np.arange(
             n_ahead + round(self.behind / self.spacing)), 0.0, s[-1])  # fmt: skip
         return np.column_stack([np.interp(s_at, s, planned[:, k]) for k in (0, 1)]) - contact
+
+    def plan_band(self, half: np.ndarray) -> np.ndarray:
+        """The band's half-extents the plan keeps clear, given this step's ``half``.
+
+        ``band_memory`` 0: the widest this route (a plan that breathes with each
+        period's spread would steer the centre up and down with it). But the widest
+        is often not the band that passes the keep-out: the first swings from the warm
+        start (z half-extents 30-41 L_vb on the model against ~20 once the band has
+        formed) and a run along the steps (its z spread is its length) hold the plan
+        out for the rest of the route. ``band_memory`` n > 0: the widest of the last n
+        control steps, the band as it is now."""
+        if self.band_memory == 0:
+            return np.maximum(self._half, half)
+        self._bands.append(np.asarray(half, dtype=float))
+        return np.max(np.stack(self._bands), axis=0)
 
     def repulsion_from(self, keep: np.ndarray, centre: np.ndarray, aim: np.ndarray,
                        past: np.ndarray, vbar: float) -> np.ndarray:  # fmt: skip
@@ -327,13 +368,15 @@ class RouteFollower:
         """Where the centre will be ``lead`` control steps on, at the drift of the last
         step (centre + lead x its last displacement): the rod answers a new flow about
         one control step late (docs/task.md), so a follower that steers the centre it
-        sees overshoots the corners. Needs the route (``contact``, its frame); the first
+        sees overshoots the corners. A run (:meth:`run_centre_or`) is led by
+        ``run_lead`` steps when set. Needs the route (``contact``, its frame); the first
         step of a route has no displacement yet."""
-        if contact is None or self.lead == 0.0:
+        if contact is None:
             return centre
         now = centre + contact
         prev, self._prev_centre = self._prev_centre, now
-        return centre if prev is None else centre + self.lead * (now - prev)
+        lead = self.run_lead if self._run and self.run_lead is not None else self.lead
+        return centre if prev is None else centre + lead * (now - prev)
 
     def hooked(self, contact: np.ndarray | None) -> bool:
         """Whether a run along the steps hooked: the last flow was within 30° of the
@@ -407,7 +450,8 @@ class RouteFollower:
 RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
-RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0}
+RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0,
+                       "band_memory": 0, "run_lead": None}  # fmt: skip
 
 
 #: |sin phi| of a flow 30° off the steps' axis (±z)

@@ -244,6 +244,47 @@ def test_route_follower_leads_the_centre_by_its_last_displacement() -> None:
             RouteFollower(layout.slices, 0.13, lead=bad)
 
 
+def test_route_follower_leads_a_run_by_run_lead() -> None:
+    """``run_lead``: while the pen lays a run (``_run``) the centre is led by ``run_lead``
+    control steps, otherwise by ``lead``; None (the default) is ``lead`` itself."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    slices = ObservationLayout(4, 4, (2.0,), route=True).slices
+    moved = np.array([0.0, 17.0])
+
+    def led(run: bool, **kw) -> np.ndarray:
+        pol = RouteFollower(slices, 0.13, lead=1.0, **kw)
+        pol._run = run
+        pol.predicted_centre(np.zeros(2), np.zeros(2))
+        return pol.predicted_centre(np.zeros(2), moved)
+
+    assert led(True, run_lead=3.0) == pytest.approx(3.0 * moved)
+    assert led(False, run_lead=3.0) == pytest.approx(moved)
+    assert led(True) == pytest.approx(moved)
+    assert led(True, run_lead=0.0) == pytest.approx([0.0, 0.0])
+    for bad in (-1.0, math.inf):
+        with pytest.raises(ValueError, match="run_lead"):
+            RouteFollower(slices, 0.13, run_lead=bad)
+
+
+def test_route_follower_plan_band_is_the_widest_of_the_route_or_of_recent_steps() -> None:
+    """``plan_band``: with ``band_memory`` 0 the plan keeps clear of the widest band seen
+    on the route (it only widens); with n > 0, of the widest of the last n steps."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    slices = ObservationLayout(4, 4, (2.0,), route=True).slices
+    halves = [[1.0, 40.0], [9.0, 20.0], [3.0, 18.0], [2.0, 21.0]]
+    for memory, want in ((0, [9.0, 40.0]), (2, [3.0, 21.0]), (3, [9.0, 21.0])):
+        pol = RouteFollower(slices, 0.13, band_memory=memory)
+        for h in halves:
+            pol._half = got = pol.plan_band(np.array(h))
+        assert got == pytest.approx(want)
+    with pytest.raises(ValueError, match="band_memory"):
+        RouteFollower(slices, 0.13, band_memory=-1)
+
+
 def test_route_follower_steers_a_run_by_its_contact_point() -> None:
     """``run_centre``: after that many flows within 30° of the same one of ±z the pen
     lays a run, whose centre is its contact point (zeros), not the midpoint of the
