@@ -437,7 +437,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     the model (presets.MODEL on presets.MESH's delta_bar). Two probes:
     ppo_residual_linear.yml trains on the linear law at delta_bar 1, and
     ppo_residual_calibrated.yml on the surrogate calibrated to the model's kinematics
-    (its flow x 1.44, a control step of 99 physics steps instead of 150)."""
+    (its flow x 1.44, a control step of 99 physics steps instead of 150), and
+    ppo_residual_linear033.yml on the model's law on a coarser rod (delta_bar 0.33)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
@@ -448,7 +449,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     surrogate = (SURROGATE["drag_law"], SURROGATE["delta_bar"])
     model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
     assert surrogate != model
-    expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0)}
+    expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
+                "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
     for path in configs:
         env_kwargs, steps = env_settings(load_config(path))
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
