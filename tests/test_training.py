@@ -434,8 +434,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     configs and the pretrained models' configs pin the fast surrogate
     (presets.SURROGATE: the printed drag law at delta_bar 1), and the evaluation config
     (training/configs/eval.yml, cnt-evaluate's default) keeps the env's default physics,
-    the model (presets.MODEL on presets.MESH's delta_bar). Two probes:
-    ppo_residual_linear.yml trains on the linear law at delta_bar 1, and
+    the model (presets.MODEL on presets.MESH's delta_bar). Three probes:
+    ppo_residual_linear.yml trains on the linear law at delta_bar 1,
     ppo_residual_calibrated.yml on the surrogate calibrated to the model's kinematics
     (its flow x 1.44, a control step of 99 physics steps instead of 150), and
     ppo_residual_linear033.yml on the model's law on a coarser rod (delta_bar 0.33)."""
