@@ -434,11 +434,13 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     configs and the pretrained models' configs pin the fast surrogate
     (presets.SURROGATE: the printed drag law at delta_bar 1), and the evaluation config
     (training/configs/eval.yml, cnt-evaluate's default) keeps the env's default physics,
-    the model (presets.MODEL on presets.MESH's delta_bar). Three probes:
+    the model (presets.MODEL on presets.MESH's delta_bar). Probes:
     ppo_residual_linear.yml trains on the linear law at delta_bar 1,
-    ppo_residual_calibrated.yml on the surrogate calibrated to the model's kinematics
-    (its flow x 1.44, a control step of 99 physics steps instead of 150), and
-    ppo_residual_linear033.yml on the model's law on a coarser rod (delta_bar 0.33)."""
+    ppo_residual_calibrated.yml (and ppo_residual_calibrated_detour.yml, its routes
+    weighted toward the detour family) on the surrogate calibrated to the model's
+    kinematics (its flow x 1.44, a control step of 99 physics steps instead of 150), and
+    ppo_residual_linear033.yml (and its _detour twin) on the model's law on a coarser
+    rod (delta_bar 0.33)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
@@ -450,7 +452,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
     assert surrogate != model
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
-                "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
+                "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33),
+                "ppo_residual_linear033_detour.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
     for path in configs:
         env_kwargs, steps = env_settings(load_config(path))
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
@@ -458,9 +461,11 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(path.name, surrogate), path.name
-            if path.name == "ppo_residual_calibrated.yml":
+            if path.name.startswith("ppo_residual_calibrated"):
                 assert (base.flow_gain, base.n_substeps) == (1.44, 99)
             else:
                 assert base.flow_gain == 1.0, path.name
+            if path.name.endswith("_detour.yml"):  # detour drawn 3 times in 10
+                assert (base.families.count("detour"), len(base.families)) == (3, 10)
         finally:
             env.close()
