@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -440,7 +441,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     weighted toward the detour family) on the surrogate calibrated to the model's
     kinematics (its flow x 1.44, a control step of 99 physics steps instead of 150), and
     ppo_residual_linear033.yml (and its _detour twin) on the model's law on a coarser
-    rod (delta_bar 0.33)."""
+    rod (delta_bar 0.33); ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
+    and ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from training.common import env_settings, load_config, make_env
 
@@ -454,7 +456,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
                 "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
     for path in configs:
-        twin_of = path.name.replace("_detour.yml", ".yml")  # a _detour twin: its physics
+        twin_of = re.sub(r"_detour2?\.yml$", ".yml", path.name)  # a _detour twin: its physics
         env_kwargs, steps = env_settings(load_config(path))
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
         try:
@@ -467,5 +469,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
                 assert base.flow_gain == 1.0, path.name
             if path.name.endswith("_detour.yml"):  # detour drawn 3 times in 10
                 assert (base.families.count("detour"), len(base.families)) == (3, 10)
+            if path.name.endswith("_detour2.yml"):  # detour drawn 2 times in 9
+                assert (base.families.count("detour"), len(base.families)) == (2, 9)
         finally:
             env.close()
