@@ -861,3 +861,23 @@ def test_record_video_writes_an_mp4(kw: dict, tmp_path) -> None:
     env.close()
     videos = list(tmp_path.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
+
+
+def test_set_route_draw_changes_the_next_routes_and_refuses_bad_values() -> None:
+    """CNTDeposit-v0.set_route_draw (a curriculum's hook): the next reset draws from the
+    new families at the new difficulty; None keeps a value; a bad value raises before
+    either changes."""
+    small = {k: v for k, v in SMALL.items() if k != "score"}  # the route task
+    env = CNTDepositEnv(**small, families=["straight", "detour"], difficulty=0.5)
+    env.set_route_draw(families="arc")
+    assert env.families == ("arc",) and env.difficulty == 0.5
+    _, info = env.reset(seed=0)
+    assert info["target"] == "arc"
+    env.set_route_draw(difficulty=0.1)
+    assert env.families == ("arc",) and env.difficulty == 0.1
+    for bad in ({"families": ["arc", "spiral"], "difficulty": 0.9}, {"families": "pads",
+                                                                      "difficulty": -0.1},
+                {"families": [], "difficulty": 0.9}, {"difficulty": float("nan")}):  # fmt: skip
+        with pytest.raises(ValueError):
+            env.set_route_draw(**bad)
+        assert env.families == ("arc",) and env.difficulty == 0.1

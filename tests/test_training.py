@@ -95,7 +95,7 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
 
 def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     """rl-zoo config forms (normalize: true, lin_ schedule, string policy_kwargs,
-    max_episode_steps under env_kwargs, callbacks), best_model.zip, VecNormalize as
+    max_episode_steps under env_kwargs, callbacks, a curriculum), best_model.zip, VecNormalize as
     npz + JSON read back, task metrics in tensorboard, and no overwritten run."""
     from training.common import fresh_dir
     from training.train import train
@@ -106,7 +106,9 @@ def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
         "normalize": True, "env_kwargs": {**env_kwargs, "max_episode_steps": 16},
         "callback": [{"training.callbacks.HeldOutEval": {"eval_targets": ["u_turn"],
                                                          "eval_freq": 64,
-                                                         "n_eval_episodes": 1}}],
+                                                         "n_eval_episodes": 1}},
+                     {"training.callbacks.Curriculum": {"stages": [
+                         {"at": 0.5, "families": ["straight"]}]}}],
         "n_steps": 32, "batch_size": 16, "n_epochs": 1, "learning_rate": "lin_3e-4",
         "policy_kwargs": "dict(net_arch=[8, 8])",
     }  # fmt: skip
@@ -128,6 +130,7 @@ def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     assert np.allclose(policy.vecnormalize.normalize_obs(obs), vn.normalize_obs(obs))
     events = b"".join(p.read_bytes() for p in (run / "tb").rglob("events.out.tfevents*"))
     assert b"task/score" in events and b"task/progress" in events
+    assert b"curriculum/stage" in events
     again = fresh_dir(tmp_path / "ppo_s0")
     assert again != run and again.name == "ppo_s0_2"
 
@@ -441,9 +444,12 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     kinematics (its flow x 1.44, a control step of 99 physics steps instead of 150), and
     ppo_residual_linear033.yml (and its _detour twin) on the model's law on a coarser
     rod (delta_bar 0.33); ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
-    and ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9)."""
+    ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9), and
+    ppo_residual_calibrated_curriculum.yml starts at 3 in 10 and ends on every family
+    once (training.callbacks.Curriculum)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
-    from training.common import env_settings, load_config, make_env
+    from cnt_env.task.routes import FAMILIES
+    from training.common import curriculum_settings, env_settings, load_config, make_env
 
     root = Path(__file__).resolve().parents[1]
     configs = sorted((root / "training" / "configs").glob("*.yml"))
@@ -454,7 +460,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     assert surrogate != model
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
                 "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
-    detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9)}  # (detours, families)
+    # (detours, families) of each weighted twin; a _curriculum twin starts at 3 in 10
+    detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10)}
     for path in configs:
         suffix = next((k for k in detour_share if path.name.endswith(k)), None)
         twin_of = path.name.removesuffix(suffix or ".yml") + ".yml"  # a weighted twin: its physics
@@ -471,5 +478,66 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             if suffix is not None:  # the detour family repeated in the drawn families
                 share = (base.families.count("detour"), len(base.families))
                 assert share == detour_share[suffix], path.name
+            stages = curriculum_settings(load_config(path))  # a curriculum is well formed
+            assert bool(stages) == (suffix == "_curriculum.yml"), path.name
+            if stages:  # ... and ends on every family once, as the untwinned config
+                assert sorted(stages[-1][1]["families"]) == sorted(FAMILIES), path.name
         finally:
             env.close()
+
+
+def test_curriculum_switches_the_route_draw_at_its_stages(tmp_path: Path) -> None:
+    """training.callbacks.Curriculum: the training envs draw from env_kwargs' families
+    until the stage's share of the budget, then from the stage's (each env's next reset;
+    CNTDeposit-v0.set_route_draw through VecEnv.env_method), and tensorboard logs
+    curriculum/stage."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from training.callbacks import make_curriculum
+    from training.common import curriculum_settings, make_env
+
+    config = {**_tiny_config(), "env_kwargs": {**SMALL, "families": ["straight", "detour"]},
+              "callback": [{"training.callbacks.Curriculum": {"stages": [
+                  {"at": 0.5, "families": ["arc"], "difficulty": 0.2}]}}]}  # fmt: skip
+    stages = curriculum_settings(config)
+    assert stages == [(0.5, {"families": ["arc"], "difficulty": 0.2})]
+    venv = DummyVecEnv([lambda: make_env(config["env_kwargs"], 30)])
+    drawn: list[tuple[str, ...]] = []
+
+    class Spy(BaseCallback):
+        def _on_step(self) -> bool:
+            drawn.append(tuple(self.training_env.get_attr("families")[0]))
+            return True
+
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=32, n_epochs=1, seed=0,
+                tensorboard_log=str(tmp_path), policy_kwargs={"net_arch": [8]})  # fmt: skip
+    model.learn(128, callback=[make_curriculum([(64, stages[0][1])]), Spy()])
+    assert drawn[0] == ("straight", "detour") and drawn[-1] == ("arc",)
+    assert drawn.index(("arc",)) == 63  # the callback runs first, at num_timesteps 64
+    assert venv.get_attr("difficulty") == [0.2]
+    events = b"".join(p.read_bytes() for p in tmp_path.rglob("events.out.tfevents*"))
+    assert b"curriculum/stage" in events
+    venv.close()
+
+
+@pytest.mark.parametrize(
+    ("stages", "match"),
+    [
+        ([{"at": 0.5}], "at, families and/or difficulty"),
+        ([{"families": ["arc"]}], "at, families and/or difficulty"),
+        ([{"at": 0.5, "families": ["arc"], "width": 3}], "at, families and/or difficulty"),
+        ([{"at": 1.0, "families": ["arc"]}], "0 < at < 1"),
+        ([{"at": 0.6, "difficulty": 0.3}, {"at": 0.4, "difficulty": 0.5}], "increasing"),
+        ([{"at": 0.5, "families": ["spiral"]}], "unknown training family 'spiral'"),
+        ([{"at": 0.5, "difficulty": 1.5}], r"difficulty must be in \[0, 1\]"),
+        ([], "non-empty list"),
+    ],
+)
+def test_a_bad_curriculum_is_refused_before_training(stages: list, match: str) -> None:
+    from training.common import curriculum_settings
+
+    config = {"callback": [{"training.callbacks.Curriculum": {"stages": stages}}]}
+    with pytest.raises(ValueError, match=match):
+        curriculum_settings(config)

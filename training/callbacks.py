@@ -3,6 +3,9 @@
 * :class:`TaskMetrics`: the task's own metrics of every finished training episode
   (``info`` of CNTDeposit-v0: score, coverage, progress, inside, shorts, completion) as
   tensorboard scalars under ``task/``;
+* :class:`Curriculum`: from each stage's share of the budget on, the training envs draw
+  their routes from that stage's families and difficulty (``CNTDeposit-v0``'s
+  ``set_route_draw``, from each env's next reset); tensorboard ``curriculum/stage``;
 * :func:`schedule`, :func:`policy_kwargs`: rl-zoo's ``lin_<value>`` schedules and string
   ``policy_kwargs`` ("dict(net_arch=[64, 64])").
 """
@@ -14,6 +17,7 @@ from typing import Any
 
 __all__ = [
     "TASK_METRICS",
+    "make_curriculum",
     "make_task_metrics",
     "policy_kwargs",
     "schedule",
@@ -67,3 +71,28 @@ def make_task_metrics():
             return True
 
     return TaskMetrics()
+
+
+def make_curriculum(stages: list[tuple[int, dict[str, Any]]]):
+    """:class:`Curriculum` over ``stages``: ``(timestep, set_route_draw kwargs)`` in
+    increasing order (training.common.curriculum_settings, scaled to the budget). Each
+    switch is printed (one line a stage)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Curriculum(BaseCallback):
+        """Switches the training envs' route draw at each stage's timestep."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.stage = 0  # stages applied so far
+
+        def _on_step(self) -> bool:
+            while self.stage < len(stages) and self.num_timesteps >= stages[self.stage][0]:
+                draw = stages[self.stage][1]
+                self.training_env.env_method("set_route_draw", **draw)
+                self.stage += 1
+                print(f"curriculum: stage {self.stage} from step {self.num_timesteps}: {draw}")
+            self.logger.record("curriculum/stage", self.stage)
+            return True
+
+    return Curriculum()

@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from cnt_env.task import routes
+from cnt_env.task import routes, settings
 from cnt_env.task import targets as targets_mod
 from policies.residual import combine, make_base_policy, observe, observed_space, zoo_entry
 
@@ -24,6 +24,7 @@ __all__ = [
     "ResidualAction",
     "algo_kwargs",
     "callback_settings",
+    "curriculum_settings",
     "env_settings",
     "eval_settings",
     "fresh_dir",
@@ -49,7 +50,7 @@ DEFAULT_MAX_EPISODE_STEPS = 400
 #: one-key dict name -> kwargs).
 EVAL_CALLBACK = "training.callbacks.HeldOutEval"
 CHECKPOINT_CALLBACK = "training.callbacks.Checkpoint"
-TASK_METRICS_CALLBACK = "training.callbacks.TaskMetrics"
+CURRICULUM_CALLBACK = "training.callbacks.Curriculum"
 
 
 def limit_threads() -> None:
@@ -103,6 +104,42 @@ def eval_settings(config: dict[str, Any]) -> dict[str, Any]:
         "n_eval_episodes": int(ev.get("n_eval_episodes", len(targets))),
         "save_freq": int(ck.get("save_freq", config.get("save_freq", 0))),
     }
+
+
+def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, Any]]]:
+    """The stages of the ``training.callbacks.Curriculum`` callback, checked before training
+    starts: ``[(at, {"families": ..., "difficulty": ...}), ...]``, ``at`` the fraction of
+    ``n_timesteps`` from which the training envs draw their routes so (``env_kwargs``
+    hold the draw before the first stage). [] without the callback.
+
+    YAML: ``{training.callbacks.Curriculum: {stages: [{at: 0.5, families: [...],
+    difficulty: 0.7}, ...]}}``; ``at`` strictly increasing in (0, 1); each stage sets
+    ``families``, ``difficulty`` or both."""
+    entry = callback_settings(config, CURRICULUM_CALLBACK)
+    if entry is None:
+        return []
+    if set(entry) != {"stages"} or not isinstance(entry["stages"], list) or not entry["stages"]:
+        raise ValueError(f"{CURRICULUM_CALLBACK} takes one key, stages: a non-empty list of "
+                         f"{{at, families, difficulty}}; got {entry!r}")  # fmt: skip
+    env_kwargs, _ = env_settings(config)
+    known = routes.FAMILIES if score_mode(env_kwargs) == "corridor" else targets_mod.FAMILIES
+    out: list[tuple[float, dict[str, Any]]] = []
+    for stage in entry["stages"]:
+        keys = set(stage) if isinstance(stage, dict) else set()
+        if "at" not in keys or not keys - {"at"} or not keys <= {"at", "families", "difficulty"}:
+            raise ValueError(f"a curriculum stage is {{at, families and/or difficulty}}, "
+                             f"got {stage!r}")  # fmt: skip
+        at = stage["at"]
+        if not isinstance(at, int | float) or not 0.0 < at < 1.0 or (out and at <= out[-1][0]):
+            raise ValueError(f"curriculum stages need 0 < at < 1, strictly increasing; got "
+                             f"{[a for a, _ in out] + [at]}")  # fmt: skip
+        draw: dict[str, Any] = {}
+        if "families" in stage:
+            draw["families"] = list(settings.families_tuple(stage["families"], known))
+        if "difficulty" in stage:
+            draw["difficulty"] = settings.difficulty_value(stage["difficulty"])
+        out.append((float(at), draw))
+    return out
 
 
 def normalize_settings(config: dict[str, Any]) -> dict[str, Any]:

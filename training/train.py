@@ -28,7 +28,8 @@ the algorithm's keyword arguments (``lin_<v>`` schedules, ``policy_kwargs`` as a
 ``normalize: true``, ``env_kwargs`` (the env's keywords and ``max_episode_steps``, the
 TimeLimit), ``env_wrapper`` (``training.common.ResidualAction`` for a residual agent)
 and ``callback`` (``training.callbacks.HeldOutEval: {eval_targets, eval_freq,
-n_eval_episodes}``, ``training.callbacks.Checkpoint: {save_freq}``). The older
+n_eval_episodes}``, ``training.callbacks.Checkpoint: {save_freq}``,
+``training.callbacks.Curriculum: {stages: [{at, families, difficulty}, ...]}``). The older
 top-level keys (``max_episode_steps``, ``eval_*``, ``save_freq``, ``residual``) still
 work.
 """
@@ -56,13 +57,14 @@ from policies.sb3 import (
     write_manifest,
 )
 
-from .callbacks import make_task_metrics
+from .callbacks import make_curriculum, make_task_metrics
 from .common import (
     CONFIG_DIR,
     ENV_ID,
     HeldOutCycle,
     ResidualAction,
     algo_kwargs,
+    curriculum_settings,
     env_settings,
     eval_settings,
     fresh_dir,
@@ -152,6 +154,7 @@ def train(
     algo = algo.lower()
     cls = {"ppo": PPO, "sac": SAC}[algo]
     env_kwargs, max_steps = env_settings(config)
+    stages = curriculum_settings(config)  # checked before any env is built
     n_envs = int(config.get("n_envs", 2))
     vec_env = vec_env or config.get("vec_env", "subproc")
     run = Path(out)
@@ -187,11 +190,17 @@ def train(
 
     callbacks = [make_task_metrics()]
     total = int(config["n_timesteps"])
+    if stages:
+        callbacks.append(make_curriculum([(int(at * total), d) for at, d in stages]))
+    # validation routes: drawn as the end of the curriculum draws them (the one aimed at)
+    eval_kwargs = dict(env_kwargs)
+    for _, draw in stages:
+        eval_kwargs.update(draw)
     ev = eval_settings(config)
     if ev["eval_targets"] and ev["eval_freq"] > 0:
 
         def eval_env_fn():
-            env = HeldOutCycle(make_env(env_kwargs, max_steps), ev["eval_targets"])
+            env = HeldOutCycle(make_env(eval_kwargs, max_steps), ev["eval_targets"])
             return Monitor(ResidualAction(env, **residual) if wrapper else env)
 
         class SaveBestStats(BaseCallback):

@@ -353,14 +353,11 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self.weights.sum() > 0:
             raise ValueError("at least one reward weight must be > 0")
         self.failure_penalty = s.non_negative("failure_penalty", failure_penalty)
-        known = routes.FAMILIES if self.score_mode == "corridor" else targets_mod.FAMILIES
-        self.families = s.families_tuple(families, known)
+        self.families = s.families_tuple(families, self._known_families())
         self.route_width = s.positive("route_width", route_width)
         if self.route_width < routes.MIN_HALF_WIDTH:
             raise ValueError(f"route_width must be >= {routes.MIN_HALF_WIDTH} L_vb")
-        self.difficulty = s.non_negative("difficulty", difficulty)
-        if self.difficulty > 1.0:
-            raise ValueError(f"difficulty must be in [0, 1], got {difficulty!r}")
+        self.difficulty = s.difficulty_value(difficulty)
         if trace_window is None and self.score_mode == "corridor":
             trace_window = ROUTE_TRACE_WINDOW
         self.trace_window = None if trace_window is None else s.positive("trace_window",
@@ -473,6 +470,25 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.render_mode == "human":
             self.render()
         return obs, info
+
+    def set_route_draw(
+        self, families: Sequence[str] | str | None = None, difficulty: float | None = None
+    ) -> None:
+        """Change how training targets are drawn, from the next reset on (a curriculum:
+        training.callbacks.Curriculum calls it through ``VecEnv.env_method``). ``families``
+        as the constructor's (None: unchanged), ``difficulty`` in [0, 1] (None: unchanged).
+        Both are checked before either changes."""
+        fams = (
+            self.families
+            if families is None
+            else settings.families_tuple(families, self._known_families())
+        )
+        diff = self.difficulty if difficulty is None else settings.difficulty_value(difficulty)
+        self.families, self.difficulty = fams, diff
+
+    def _known_families(self) -> Mapping[str, Any]:
+        """The families of the score mode: routes (corridor) or thin polylines."""
+        return routes.FAMILIES if self.score_mode == "corridor" else targets_mod.FAMILIES
 
     def episode_steps_for(self, route: Route) -> int:
         """Episode length (control steps) of ``route`` (:func:`routes.episode_steps`)."""

@@ -30,6 +30,7 @@ __all__ = [
     "choice",
     "count",
     "deposition_config",
+    "difficulty_value",
     "families_tuple",
     "mapping_or_none",
     "non_negative",
@@ -116,6 +117,17 @@ def families_tuple(value: Any, known: Mapping[str, Any]) -> tuple[str, ...]:
     if not names:
         raise ValueError("families must name at least one family")
     return names
+
+
+def difficulty_value(value: Any) -> float:
+    """Route difficulty: a number in [0, 1]."""
+    try:
+        d = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"difficulty must be a number in [0, 1], got {value!r}") from exc
+    if not 0.0 <= d <= 1.0:
+        raise ValueError(f"difficulty must be in [0, 1], got {value!r}")
+    return d
 
 
 def physics_params(
