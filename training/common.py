@@ -122,7 +122,7 @@ def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, A
         raise ValueError(f"{CURRICULUM_CALLBACK} takes one key, stages: a non-empty list of "
                          f"{{at, families, difficulty}}; got {entry!r}")  # fmt: skip
     env_kwargs, _ = env_settings(config)
-    known = routes.FAMILIES if score_mode(env_kwargs) == "corridor" else targets_mod.FAMILIES
+    known = routes.families_of(score_mode(env_kwargs))
     out: list[tuple[float, dict[str, Any]]] = []
     for stage in entry["stages"]:
         keys = set(stage) if isinstance(stage, dict) else set()

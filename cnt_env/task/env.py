@@ -353,7 +353,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self.weights.sum() > 0:
             raise ValueError("at least one reward weight must be > 0")
         self.failure_penalty = s.non_negative("failure_penalty", failure_penalty)
-        self.families = s.families_tuple(families, self._known_families())
+        self.families = s.families_tuple(families, routes.families_of(self.score_mode))
         self.route_width = s.positive("route_width", route_width)
         if self.route_width < routes.MIN_HALF_WIDTH:
             raise ValueError(f"route_width must be >= {routes.MIN_HALF_WIDTH} L_vb")
@@ -478,17 +478,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         training.callbacks.Curriculum calls it through ``VecEnv.env_method``). ``families``
         as the constructor's (None: unchanged), ``difficulty`` in [0, 1] (None: unchanged).
         Both are checked before either changes."""
-        fams = (
-            self.families
-            if families is None
-            else settings.families_tuple(families, self._known_families())
-        )
+        known = routes.families_of(self.score_mode)
+        fams = self.families if families is None else settings.families_tuple(families, known)
         diff = self.difficulty if difficulty is None else settings.difficulty_value(difficulty)
         self.families, self.difficulty = fams, diff
-
-    def _known_families(self) -> Mapping[str, Any]:
-        """The families of the score mode: routes (corridor) or thin polylines."""
-        return routes.FAMILIES if self.score_mode == "corridor" else targets_mod.FAMILIES
 
     def episode_steps_for(self, route: Route) -> int:
         """Episode length (control steps) of ``route`` (:func:`routes.episode_steps`)."""

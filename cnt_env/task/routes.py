@@ -65,6 +65,7 @@ __all__ = [
     "Route",
     "draw",
     "episode_steps",
+    "families_of",
     "held_out",
     "rectangle",
     "resolve",
@@ -331,6 +332,11 @@ def draw(family: str, rng: np.random.Generator, difficulty: float = DEFAULT_DIFF
     if not (0.0 <= difficulty <= 1.0):
         raise ValueError(f"difficulty must be in [0, 1], got {difficulty!r}")
     return FAMILIES[family](rng, float(difficulty))
+
+
+def families_of(score: str) -> Mapping[str, Any]:
+    """The training families of a task: routes (``score="corridor"``) or thin polylines."""
+    return FAMILIES if score == "corridor" else targets_mod.FAMILIES
 
 
 def sample(rng: np.random.Generator, families: Sequence[str] | None = None,
