@@ -541,3 +541,16 @@ def test_a_bad_curriculum_is_refused_before_training(stages: list, match: str) -
     config = {"callback": [{"training.callbacks.Curriculum": {"stages": stages}}]}
     with pytest.raises(ValueError, match=match):
         curriculum_settings(config)
+
+
+def test_an_unknown_callback_is_refused_and_every_shipped_config_passes() -> None:
+    """A misspelt callback would train silently without it: check_callbacks refuses it
+    (cnt-train calls it before building any env); the shipped configs pass."""
+    from training.common import CONFIG_DIR, check_callbacks, load_config
+
+    for path in sorted(CONFIG_DIR.glob("*.yml")):
+        check_callbacks(load_config(path))
+    for bad in ("training.callbacks.Curiculum", [{"training.callbacks.HeldOutEvl": {}}]):
+        with pytest.raises(ValueError, match="unknown callback"):
+            check_callbacks({"callback": bad})
+    check_callbacks({"callback": "training.callbacks.Checkpoint"})  # a single entry

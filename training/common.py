@@ -24,6 +24,7 @@ __all__ = [
     "ResidualAction",
     "algo_kwargs",
     "callback_settings",
+    "check_callbacks",
     "curriculum_settings",
     "env_settings",
     "eval_settings",
@@ -104,6 +105,19 @@ def eval_settings(config: dict[str, Any]) -> dict[str, Any]:
         "n_eval_episodes": int(ev.get("n_eval_episodes", len(targets))),
         "save_freq": int(ck.get("save_freq", config.get("save_freq", 0))),
     }
+
+
+def check_callbacks(config: dict[str, Any]) -> None:
+    """Refuse a ``callback`` entry that is not one of the project's (HeldOutEval,
+    Checkpoint, Curriculum): a misspelt name would otherwise train without it."""
+    entries = config.get("callback")
+    entries = entries if isinstance(entries, list) else [entries] if entries else []
+    known = (EVAL_CALLBACK, CHECKPOINT_CALLBACK, CURRICULUM_CALLBACK)
+    for e in entries:
+        names = list(e) if isinstance(e, dict) else [e]
+        for name in names:
+            if name not in known:
+                raise ValueError(f"unknown callback {name!r}; choose from {list(known)}")
 
 
 def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, Any]]]:

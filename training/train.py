@@ -64,6 +64,7 @@ from .common import (
     HeldOutCycle,
     ResidualAction,
     algo_kwargs,
+    check_callbacks,
     curriculum_settings,
     env_settings,
     eval_settings,
@@ -154,7 +155,8 @@ def train(
     algo = algo.lower()
     cls = {"ppo": PPO, "sac": SAC}[algo]
     env_kwargs, max_steps = env_settings(config)
-    stages = curriculum_settings(config)  # checked before any env is built
+    check_callbacks(config)  # the callbacks, checked before any env is built
+    stages = curriculum_settings(config)
     n_envs = int(config.get("n_envs", 2))
     vec_env = vec_env or config.get("vec_env", "subproc")
     run = Path(out)
