@@ -27,6 +27,7 @@ __all__ = [
     "pin_base",
     "residual_settings",
     "zoo_entry",
+    "zoo_names",
 ]
 
 #: Base policies a residual agent can correct.
@@ -63,6 +64,11 @@ def zoo_entry(entries: Any, name: str) -> dict[str, Any] | None:
         if _names(e, name):
             return dict(e[name] or {}) if isinstance(e, dict) else {}
     return None
+
+
+def zoo_names(entries: Any) -> list[Any]:
+    """The names in an rl-zoo list (``env_wrapper``, ``callback``), in order."""
+    return [n for e in _zoo_list(entries) for n in (list(e) if isinstance(e, dict) else [e])]
 
 
 def pin_base(entry: dict, score_mode: str) -> dict:

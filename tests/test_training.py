@@ -465,7 +465,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     for path in configs:
         suffix = next((k for k in detour_share if path.name.endswith(k)), None)
         twin_of = path.name.removesuffix(suffix or ".yml") + ".yml"  # a weighted twin: its physics
-        env_kwargs, steps = env_settings(load_config(path))
+        config = load_config(path)
+        env_kwargs, steps = env_settings(config)
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
         try:
             base = env.unwrapped
@@ -478,7 +479,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             if suffix is not None:  # the detour family repeated in the drawn families
                 share = (base.families.count("detour"), len(base.families))
                 assert share == detour_share[suffix], path.name
-            stages = curriculum_settings(load_config(path))  # a curriculum is well formed
+            stages = curriculum_settings(config)  # a curriculum is well formed
             assert bool(stages) == (suffix == "_curriculum.yml"), path.name
             if stages:  # ... and ends on every family once, as the untwinned config
                 assert sorted(stages[-1][1]["families"]) == sorted(FAMILIES), path.name

@@ -14,7 +14,14 @@ import yaml
 
 from cnt_env.task import routes, settings
 from cnt_env.task import targets as targets_mod
-from policies.residual import combine, make_base_policy, observe, observed_space, zoo_entry
+from policies.residual import (
+    combine,
+    make_base_policy,
+    observe,
+    observed_space,
+    zoo_entry,
+    zoo_names,
+)
 
 __all__ = [
     "CONFIG_DIR",
@@ -110,14 +117,10 @@ def eval_settings(config: dict[str, Any]) -> dict[str, Any]:
 def check_callbacks(config: dict[str, Any]) -> None:
     """Refuse a ``callback`` entry that is not one of the project's (HeldOutEval,
     Checkpoint, Curriculum): a misspelt name would otherwise train without it."""
-    entries = config.get("callback")
-    entries = entries if isinstance(entries, list) else [entries] if entries else []
     known = (EVAL_CALLBACK, CHECKPOINT_CALLBACK, CURRICULUM_CALLBACK)
-    for e in entries:
-        names = list(e) if isinstance(e, dict) else [e]
-        for name in names:
-            if name not in known:
-                raise ValueError(f"unknown callback {name!r}; choose from {list(known)}")
+    for name in zoo_names(config.get("callback")):
+        if name not in known:
+            raise ValueError(f"unknown callback {name!r}; choose from {list(known)}")
 
 
 def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, Any]]]:
