@@ -45,9 +45,11 @@ __all__ = [
     "UntrustedModelError",
     "check_manifest",
     "convert_vecnormalize_pickle",
+    "file_sha256",
     "load_policy",
     "load_vecnormalize",
     "model_files",
+    "restore_vecnormalize",
     "safe_custom_objects",
     "save_vecnormalize",
     "vecnormalize_path",
@@ -84,7 +86,7 @@ def model_files(model_path: str | Path) -> list[Path]:
 # ---- checksum manifest --------------------------------------------------------------------
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
     h = hashlib.sha256()
     with path.open("rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
@@ -98,7 +100,7 @@ def write_manifest(directory: str | Path, names: list[str] | None = None) -> Pat
     d = Path(directory)
     if names is None:
         names = sorted(p.name for p in d.iterdir() if p.is_file() and p.name != MANIFEST_NAME)
-    files = {n: _sha256(d / n) for n in sorted(names)}
+    files = {n: file_sha256(d / n) for n in sorted(names)}
     path = d / MANIFEST_NAME
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps({"format": MANIFEST_FORMAT, "sha256": files}, indent=2) + "\n")
@@ -128,7 +130,7 @@ def check_manifest(model_path: str | Path, trust: bool = False) -> bool:
                 problems.append(f"{f.name} is listed but missing")
             elif f.is_file() and f.name not in listed:
                 problems.append(f"{f.name} is not listed")
-            elif f.is_file() and _sha256(f) != listed[f.name]:
+            elif f.is_file() and file_sha256(f) != listed[f.name]:
                 problems.append(f"{f.name} does not match its sha256")
     if problems:
         msg = f"{model_path}: checksum manifest {manifest} check failed: " + "; ".join(problems)
@@ -503,6 +505,28 @@ def load_vecnormalize(stem: Path) -> NormalizerStats:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz/.json: {exc}"
         raise ValueError(msg) from exc
+
+
+def restore_vecnormalize(venv, stem: Path) -> None:
+    """Set the running statistics of the VecNormalize ``venv`` (training goes on updating
+    them) to those written by :func:`save_vecnormalize` at ``stem``: to continue training a
+    saved agent. Its settings (clip, gamma, ...) stay the venv's (the config's)."""
+    stem = Path(stem)
+    try:
+        with np.load(stem.with_suffix(".npz"), allow_pickle=False) as d:
+            arrays = {k: np.asarray(d[k], dtype=np.float64) for k in d.files}
+        obs_mean, ret_mean = arrays["obs_mean"], arrays["ret_mean"]
+        obs_var, ret_var = arrays["obs_var"], arrays["ret_var"]
+        obs_count, ret_count = float(arrays["obs_count"]), float(arrays["ret_count"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        msg = f"cannot read the VecNormalize statistics {stem}.npz: {exc}"
+        raise ValueError(msg) from exc
+    if obs_mean.shape != venv.obs_rms.mean.shape or ret_mean.shape != venv.ret_rms.mean.shape:
+        raise ValueError(f"the VecNormalize statistics {stem}.npz are for observations of "
+                         f"shape {obs_mean.shape}, the env gives {venv.obs_rms.mean.shape}: "
+                         "the agent was trained on another observation")  # fmt: skip
+    venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = obs_mean, obs_var, obs_count
+    venv.ret_rms.mean, venv.ret_rms.var, venv.ret_rms.count = ret_mean, ret_var, ret_count
 
 
 def _load_vecnormalize_pickle(path: Path):

@@ -442,8 +442,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_calibrated.yml (and ppo_residual_calibrated_detour.yml, its routes
     weighted toward the detour family) on the surrogate calibrated to the model's
     kinematics (its flow x 1.44, a control step of 99 physics steps instead of 150), and
-    ppo_residual_linear033.yml (and its _detour twin) on the model's law on a coarser
-    rod (delta_bar 0.33); ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
+    ppo_residual_linear033.yml (and its _detour twin, and its _finetune twin, which goes
+    on training a calibrated agent) on the model's law on a coarser rod (delta_bar 0.33);
+    ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
     ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9), and
     ppo_residual_calibrated_curriculum.yml starts at 3 in 10 and ends on every family
     once (training.callbacks.Curriculum)."""
@@ -459,7 +460,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
     assert surrogate != model
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
-                "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
+                "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33),
+                "ppo_residual_linear033_finetune.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
     # (detours, families) of each weighted twin; a _curriculum twin starts at 3 in 10
     detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10)}
     for path in configs:
@@ -555,3 +557,54 @@ def test_an_unknown_callback_is_refused_and_every_shipped_config_passes() -> Non
         with pytest.raises(ValueError, match="unknown callback"):
             check_callbacks({"callback": bad})
     check_callbacks({"callback": "training.callbacks.Checkpoint"})  # a single entry
+
+
+def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path: Path) -> None:
+    """``trained_agent`` (cnt-train --trained-agent) starts from the saved weights and
+    VecNormalize statistics: at a learning rate of 0 the weights come out unchanged (a new
+    model's would differ) and the statistics count the saved observations plus the new
+    ones. An agent that would act on something else is refused before any env is built."""
+    import torch
+    import yaml
+    from stable_baselines3 import PPO
+
+    from policies.sb3 import file_sha256, load_vecnormalize, write_manifest
+    from training.train import train
+
+    config = {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+        {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3}}]}  # fmt: skip
+    first = train("ppo", config, tmp_path / "first", seed=0, progress_bar=False)
+    again = train("ppo", {**config, "learning_rate": 0.0}, tmp_path / "again", seed=5,
+                  progress_bar=False, trained_agent=first)  # fmt: skip
+    fresh = train("ppo", {**config, "learning_rate": 0.0}, tmp_path / "fresh", seed=5,
+                  progress_bar=False)  # fmt: skip
+
+    def weights(path: Path) -> list[torch.Tensor]:
+        return list(PPO.load(path, device="cpu").policy.state_dict().values())
+
+    w0, w1, w2 = weights(first), weights(again), weights(fresh)
+    assert all(torch.equal(a, b) for a, b in zip(w0, w1, strict=True))
+    assert not all(torch.equal(a, b) for a, b in zip(w0, w2, strict=True))
+    stem = "ppo_vecnormalize"
+    n0, n1, n2 = (load_vecnormalize(p.with_name(stem)).obs_rms.count for p in (first, again, fresh))
+    assert n1 == pytest.approx(n0 + n2 - 1e-4), (n0, n1, n2)  # 1e-4: the initial count
+    record = yaml.safe_load((again.parent / "config.yml").read_text())["run"]["trained_agent"]
+    assert record["path"] == str(first) and record["run"]["timesteps_done"] == 64
+    assert record["sha256"] == file_sha256(first)
+
+    other_base = {**config, "env_wrapper": [{"training.common.ResidualAction": {
+        "base": "scripted", "scale": 0.5}}]}  # fmt: skip
+    plain = {k: v for k, v in config.items() if k != "env_wrapper"}
+    for cfg, match in ((other_base, "residual settings"), (plain, "residual settings"),
+                       ({**config, "normalize": False}, "VecNormalize"),
+                       ({**config, "frame_stack": 2}, "frame stack")):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            train("ppo", cfg, tmp_path / "bad", seed=0, progress_bar=False, trained_agent=first)
+        assert not (tmp_path / "bad" / "monitor").exists(), "refused after building envs"
+    with pytest.raises(ValueError, match="policy"):  # SB3's own check of policy_kwargs
+        train("ppo", {**config, "policy_kwargs": {"net_arch": [8]}}, tmp_path / "bad2",
+              seed=0, progress_bar=False, trained_agent=first)  # fmt: skip
+    first.with_suffix(".yml").unlink()
+    write_manifest(first.parent, [f.name for f in first.parent.glob("ppo*") if f.is_file()])
+    with pytest.raises(ValueError, match="resolved config"):
+        train("ppo", config, tmp_path / "bad3", seed=0, progress_bar=False, trained_agent=first)

@@ -2,6 +2,7 @@
 
     cnt-train --algo ppo [--config training/configs/ppo.yml] [--seed 0]
               [--n-timesteps N] [--max-wall-seconds S] [--out runs/] [--n-envs 2]
+              [--trained-agent runs/ppo_s0/ppo.zip]
 
 One run directory ``<out>/<algo>_s<seed>/`` (``_2``, ``_3``, ... when it exists: a run
 never overwrites an earlier one) holds:
@@ -50,8 +51,13 @@ import yaml
 from cnt_env.io import to_jsonable
 from policies.residual import pin_base, residual_settings
 from policies.sb3 import (
+    check_model,
+    file_sha256,
     frame_stack,
+    model_config,
     model_files,
+    restore_vecnormalize,
+    safe_custom_objects,
     save_vecnormalize,
     vecnormalize_path,
     write_manifest,
@@ -73,6 +79,7 @@ from .common import (
     load_config,
     make_env,
     normalize_settings,
+    score_mode,
 )
 
 __all__ = ["main", "train"]
@@ -137,8 +144,15 @@ def train(
     max_wall_seconds: float | None = None,
     progress_bar: bool = True,
     verbose: int = 0,
+    trained_agent: Path | None = None,
 ) -> Path:
-    """Train ``algo`` with ``config`` (an rl-zoo entry); returns the model path."""
+    """Train ``algo`` with ``config`` (an rl-zoo entry); returns the model path.
+
+    ``trained_agent``: a model saved by cnt-train (``.zip`` with its ``.yml`` and
+    VecNormalize statistics) to go on training instead of a new one (rl-zoo's
+    ``--trained-agent``), e.g. on other physics (:func:`check_trained_agent`). The
+    config's hyperparameters replace the saved ones, its schedules start again, and the
+    step count starts at 0; the run's ``config.yml`` records the agent's earlier run."""
     limit_threads()
     import stable_baselines3
     from stable_baselines3 import PPO, SAC
@@ -157,6 +171,7 @@ def train(
     env_kwargs, max_steps = env_settings(config)
     check_callbacks(config)  # the callbacks, checked before any env is built
     stages = curriculum_settings(config)
+    earlier = None if trained_agent is None else check_trained_agent(trained_agent, algo, config)
     n_envs = int(config.get("n_envs", 2))
     vec_env = vec_env or config.get("vec_env", "subproc")
     run = Path(out)
@@ -187,8 +202,15 @@ def train(
     tb = str(run / "tb") if _has_tensorboard() else None
     if tb is None:
         print("tensorboard is not installed: no tensorboard logs (pip install tensorboard)")
-    model = cls(config.get("policy", "MlpPolicy"), venv, seed=seed, tensorboard_log=tb,
-                verbose=verbose, device="cpu", **algo_kwargs(config))  # fmt: skip
+    kwargs = dict(seed=seed, tensorboard_log=tb, verbose=verbose, device="cpu")
+    if trained_agent is None:
+        model = cls(config.get("policy", "MlpPolicy"), venv, **kwargs, **algo_kwargs(config))
+    else:  # the saved weights; the config's hyperparameters (SB3 checks policy_kwargs)
+        custom = safe_custom_objects(trained_agent, algo)
+        model = cls.load(str(trained_agent), env=venv, custom_objects=custom, **kwargs,
+                         **algo_kwargs(config))  # fmt: skip
+        if norm:
+            restore_vecnormalize(normalizer, vecnormalize_path(trained_agent))
 
     callbacks = [make_task_metrics()]
     total = int(config["n_timesteps"])
@@ -271,6 +293,7 @@ def train(
             "wall_time_s": round(wall, 1),
             "steps_per_s": round(model.num_timesteps / wall, 2),
             "argv": sys.argv,
+            "trained_agent": earlier,
             "versions": {
                 "python": platform.python_version(),
                 "stable_baselines3": stable_baselines3.__version__,
@@ -287,6 +310,39 @@ def train(
     write_manifest(run, [f.name for m in models for f in model_files(m) if f.is_file()])
     print(f"{algo}: {model.num_timesteps} steps in {wall:.0f} s -> {model_path}")
     return model_path
+
+
+def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[str, Any]:
+    """Refuse to go on training the model at ``path`` with ``config`` unless the agent it
+    makes acts on the same thing: the same algorithm, a residual agent's same base with the
+    same pinned options, the same frame stack, and VecNormalize statistics if (and only
+    if) the config normalises. The spaces and ``policy_kwargs`` are checked by SB3 when it
+    loads. Returns the record of the agent's earlier run (path, sha256, its ``run``)."""
+    path = Path(path)
+    check_model(path, algo)  # the manifest; nothing is unpickled
+    saved = model_config(path).get(ENV_ID)
+    if not isinstance(saved, dict):
+        raise ValueError(f"{path.with_suffix('.yml')}, the resolved config cnt-train "
+                         "writes beside a model, is missing: cannot tell what the agent "
+                         "acts on")  # fmt: skip
+    env_kwargs, _ = env_settings(config)
+    mode = score_mode(env_kwargs)
+    was = to_jsonable(residual_settings(pin_base(saved, mode)))
+    now = to_jsonable(residual_settings(pin_base(config, mode)))
+    if was != now:
+        raise ValueError(f"{path.name} was trained with the residual settings {was}; "
+                         f"this config gives {now}: set the config's ResidualAction to "
+                         "the agent's")  # fmt: skip
+    if frame_stack(saved) != frame_stack(config):
+        raise ValueError(f"{path.name} was trained on a frame stack of {frame_stack(saved)}, "
+                         f"the config asks for {frame_stack(config)}")  # fmt: skip
+    has_stats = vecnormalize_path(path).with_suffix(".npz").is_file()
+    if has_stats != bool(normalize_settings(config)):
+        raise ValueError(f"{path.name} was trained {'with' if has_stats else 'without'} "
+                         "VecNormalize statistics (normalize: true) and the config "
+                         f"{'does not normalise' if has_stats else 'normalises'}")  # fmt: skip
+    run = model_config(path).get("run")
+    return {"path": str(path), "sha256": file_sha256(path), "run": run}
 
 
 def _checkpoint_callback(base):
@@ -333,6 +389,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop training after this wall time")  # fmt: skip
     p.add_argument("--vec-env", choices=("subproc", "dummy"), default=None,
                    help="vector env (None: the config's, else subproc)")  # fmt: skip
+    p.add_argument("--trained-agent", type=Path, default=None,
+                   help="a model saved by cnt-train (.zip) to go on training (rl-zoo's "
+                        "--trained-agent; same base, spaces and policy_kwargs)")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("runs"), help="parent of the run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity")
@@ -354,7 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     run = fresh_dir(args.out / f"{args.algo}_s{args.seed}")  # never overwrites a run
     train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
           max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,
-          verbose=args.verbose)  # fmt: skip
+          verbose=args.verbose, trained_agent=args.trained_agent)  # fmt: skip
     return 0
 
 
