@@ -8,11 +8,14 @@ families (never the held-out set): the evidence behind its defaults
 
 Each (variant, family, seed) is one episode of the config's env with
 ``reset(seed=seed, options={"target": family})`` (the family's route drawn from the env's
-``np_random``), played by ``RouteFollower.from_env(env, **options)``. One JSON line per
-episode (score, precision, progress, shorts, steps); then the mean score per variant and
-family. The default variants: ``round3`` (no plan, the window's mean, the plain
-repulsion: the follower before this study), ``plan`` (plan around keep-outs, memory 0),
-``lead0`` (no predicted centre), ``default`` (the shipped options).
+``np_random``; the family ``validation`` is the validation route ``seed`` of
+``benchmarks/checkpoint_selection.py`` and of the training callbacks, a draw from every
+training family with reset seed 50 000 + ``seed``), played by
+``RouteFollower.from_env(env, **options)``. One JSON line per episode (score, precision,
+progress, shorts, steps); then the mean score per variant and family. The default
+variants: ``round3`` (no plan, the window's mean, the plain repulsion: the follower
+before this study), ``plan`` (plan around keep-outs, memory 0), ``lead0`` (no predicted
+centre), ``default`` (the shipped options).
 """
 
 from __future__ import annotations
@@ -36,7 +39,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _episode(job: tuple) -> dict:
     from policies import RouteFollower
-    from training.common import env_settings, limit_threads, load_config, make_env
+    from training.common import (
+        VALIDATION_SEED0,
+        env_settings,
+        limit_threads,
+        load_config,
+        make_env,
+    )
     from training.evaluate import _play
 
     variant, options, family, seed, config = job
@@ -46,7 +55,10 @@ def _episode(job: tuple) -> dict:
     try:
         policy = RouteFollower.from_env(env, **options)
         t0 = time.perf_counter()
-        obs, _ = env.reset(seed=seed, options={"target": family})
+        if family == "validation":  # the validation routes of checkpoint_selection.py
+            obs, _ = env.reset(seed=VALIDATION_SEED0 + seed)
+        else:
+            obs, _ = env.reset(seed=seed, options={"target": family})
         policy.reset(seed)
         steps, _, info = _play(env, policy, obs)
         return {"variant": variant, "options": options, "family": family, "seed": seed,

@@ -25,7 +25,12 @@ line). Without the route it uses the window's mean. Then:
   run, whose windows span its length, so their midpoint lags the contact by half of it
   (~45 L_vb on a detour's first leg: the flow stayed along the steps past the corner and
   the run entered the keep-out beyond it). The flow given tells a run, not the trace: a
-  band's first swing passes a trace test (a probe of that scored 0.145 on 8 detours);
+  band's first swing passes a trace test (a probe of that scored 0.145 on 8 detours).
+  A run goes on while the flow stays within ``run_exit`` (default 45°) of the steps'
+  axis: with the entry's 30°, a run whose contact lies off the route is steered 45° off
+  the axis, which ends it; the next step steers the band's centre, back along the axis,
+  and the follower alternates every step (seen on a validation route: -86°, -45°, -89°,
+  -47°, ...);
 * the flow points from the centre to the aim, plus ``gain`` times the centre's offset
   across the route (back toward the route's line, which the drift alone corrects slowly);
 * keep-outs (a short circuit zeroes the score after 20 nodes): with the route known
@@ -120,6 +125,19 @@ on the rest) against **0.717** (1 shorted; 0.765). The widest band is a safety m
 against the short, which zeroes a route; the defaults stay. (A probe that forgot only
 the first 8 or 12 control steps' band scored 0.587 and 0.506 on seeds 0-7 and was
 dropped.)
+The run's exit (study "2026-11-27 run exit" in
+``benchmarks/results/follower_study_converged.jsonl``, same command, ``--variant
+'exit45={"run_exit": 45.0}'``; on the machine of that day, whose episodes differ in the
+last digits from the earlier studies', ``docs/architecture.md``): over 8 families x seeds
+0-2, mean **0.939** at 45° against 0.906 at 30° and 0.926 at 60°; the difference is one
+detour the 30° follower shorts (seed 0: 0.000 against 0.851); the other 23 episodes move
+by -0.03 to +0.03 (without the detours 0.957 against 0.960; 60° loses pads, 0.863).
+Detours over seeds 3-7: 0.756 against 0.776, none shorted by either. On the model's 12
+validation routes (``--families validation --seeds 0,...,11``, the routes of
+``benchmarks/checkpoint_selection.py``): 0.886 against 0.818, a route the 30° follower
+shorts going from 0.000 to 0.823, the other 11 0.891 against 0.892 (within ±0.07 each).
+So 45° ends the alternation and, in 32 episodes, two shorts with it, at no measured cost
+on the routes neither shorts.
 """
 
 from __future__ import annotations
@@ -166,6 +184,7 @@ class RouteFollower:
         run_centre: int = 1,
         band_memory: int = 0,
         run_lead: float | None = None,
+        run_exit: float = 45.0,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -202,6 +221,9 @@ class RouteFollower:
         if int(run_centre) < 0:
             raise ValueError(f"run_centre must be >= 0 control steps, got {run_centre!r}")
         self.run_centre = int(run_centre)
+        if not (math.isfinite(run_exit) and 30.0 <= run_exit < 90.0):
+            raise ValueError(f"run_exit must be an angle in [30, 90) degrees, got {run_exit!r}")
+        self.run_exit = float(run_exit)
         if int(band_memory) < 0:
             raise ValueError(f"band_memory must be >= 0 control steps, got {band_memory!r}")
         self.band_memory = int(band_memory)
@@ -358,9 +380,14 @@ class RouteFollower:
         """Whether the pen lays a run along the steps, told by the flow it was given, not
         by the trace (a band's first swing looks like a run): the last ``run_centre``
         flows all within 30° of the same one of ±z (a flow along the steps lays an almost
-        straight run, module doc). ``run_centre`` 0: never."""
+        straight run, module doc). ``run_centre`` 0: never. A run goes on while the
+        last flow stays within ``run_exit`` degrees of its axis: with 30 (the entry's
+        angle) a run whose contact lies off the route turns the flow past 30° and the
+        next step, steering the band's centre again, turns it back, every other step."""
         if self.run_centre == 0 or len(self._phis) < self.run_centre:
             return False
+        if self._run and self.run_exit > 30.0:
+            return steps_sign(self._phis[-1], self.run_exit) != 0
         signs = {steps_sign(p) for p in self._phis}
         return len(signs) == 1 and 0 not in signs
 
@@ -451,19 +478,20 @@ RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
 RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0,
-                       "band_memory": 0, "run_lead": None}  # fmt: skip
+                       "band_memory": 0, "run_lead": None, "run_exit": 30.0}  # fmt: skip
 
 
 #: |sin phi| of a flow 30° off the steps' axis (±z)
 _ALONG_STEPS = math.cos(math.radians(30.0))
 
 
-def steps_sign(phi: float) -> int:
-    """+1 / -1 for a flow ``phi`` within 30° of +z / -z (along the steps), else 0: the
-    flows that lay a run (:meth:`RouteFollower.laying_run`) or can hook one
-    (:meth:`RouteFollower.hooked`)."""
+def steps_sign(phi: float, within: float = 30.0) -> int:
+    """+1 / -1 for a flow ``phi`` within ``within`` degrees (30: a flow that lays a run,
+    :meth:`RouteFollower.laying_run`, or can hook one, :meth:`RouteFollower.hooked`) of
+    +z / -z (along the steps), else 0."""
     f_z = math.sin(phi)
-    return int(math.copysign(1.0, f_z)) if abs(f_z) >= _ALONG_STEPS else 0
+    along = _ALONG_STEPS if within == 30.0 else math.cos(math.radians(within))
+    return int(math.copysign(1.0, f_z)) if abs(f_z) >= along else 0
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

@@ -323,6 +323,36 @@ def test_route_follower_steers_a_run_by_its_contact_point() -> None:
         RouteFollower(slices, 0.13, run_centre=-1)
 
 
+def test_route_follower_keeps_a_run_until_its_flow_leaves_run_exit() -> None:
+    """``run_exit``: a run, once laid, goes on while the last flow stays within
+    ``run_exit`` degrees of the steps' axis; a new run still needs flows within 30°. At 30
+    (the entry's angle) a flow 45° off ends it, the next step steers the band's centre."""
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    slices = ObservationLayout(4, 4, (2.0,), route=True).slices
+    band, contact = np.array([-3.0, 12.0]), np.array([5.0, 40.0])
+    down = -math.pi / 2
+
+    def run_after(phis: list[float], run_exit: float) -> list[bool]:
+        pol = RouteFollower(slices, 0.13, run_centre=1, run_exit=run_exit)
+        out = []
+        for phi in phis:
+            pol._phis.append(phi)
+            out.append(bool(np.all(pol.run_centre_or(band, contact) == 0.0)))
+        return out
+
+    d45, d55, d70 = (down + math.radians(a) for a in (45.0, 55.0, 70.0))
+    assert run_after([down, d45, down, d45], 30.0) == [True, False, True, False]
+    assert run_after([down, d45, down, d45], 50.0) == [True, True, True, True]
+    assert run_after([down, d45, d55], 50.0) == [True, True, False]
+    assert run_after([d45, d45], 50.0) == [False, False]  # entry still needs 30°
+    assert run_after([down, d70], 60.0) == [True, False]
+    for bad in (29.0, 90.0, float("nan")):
+        with pytest.raises(ValueError, match="run_exit"):
+            RouteFollower(slices, 0.13, run_exit=bad)
+
+
 def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
     """``hooked``: the last flow within 30° of the steps (±z) and the contact ran along
     them against it by more than ``hook_tol``; then the flow turns ``unhook`` off the
