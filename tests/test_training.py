@@ -601,6 +601,8 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
         with pytest.raises(ValueError, match=match):
             train("ppo", cfg, tmp_path / "bad", seed=0, progress_bar=False, trained_agent=first)
         assert not (tmp_path / "bad" / "monitor").exists(), "refused after building envs"
+    with pytest.raises(ValueError, match="is a ppo agent"):
+        train("sac", config, tmp_path / "bad1", seed=0, progress_bar=False, trained_agent=first)
     with pytest.raises(ValueError, match="policy"):  # SB3's own check of policy_kwargs
         train("ppo", {**config, "policy_kwargs": {"net_arch": [8]}}, tmp_path / "bad2",
               seed=0, progress_bar=False, trained_agent=first)  # fmt: skip

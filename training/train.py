@@ -319,6 +319,10 @@ def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[s
     if) the config normalises. The spaces and ``policy_kwargs`` are checked by SB3 when it
     loads. Returns the record of the agent's earlier run (path, sha256, its ``run``)."""
     path = Path(path)
+    run = model_config(path).get("run")  # yaml.safe_load
+    trained_algo = run.get("algo") if isinstance(run, dict) else None
+    if trained_algo not in (None, algo):
+        raise ValueError(f"{path.name} is a {trained_algo} agent; pass --algo {trained_algo}")
     check_model(path, algo)  # the manifest; nothing is unpickled
     saved = model_config(path).get(ENV_ID)
     if not isinstance(saved, dict):
@@ -341,7 +345,6 @@ def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[s
         raise ValueError(f"{path.name} was trained {'with' if has_stats else 'without'} "
                          "VecNormalize statistics (normalize: true) and the config "
                          f"{'does not normalise' if has_stats else 'normalises'}")  # fmt: skip
-    run = model_config(path).get("run")
     return {"path": str(path), "sha256": file_sha256(path), "run": run}
 
 
