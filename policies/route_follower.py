@@ -481,17 +481,12 @@ RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "ru
                        "band_memory": 0, "run_lead": None, "run_exit": 30.0}  # fmt: skip
 
 
-#: |sin phi| of a flow 30° off the steps' axis (±z)
-_ALONG_STEPS = math.cos(math.radians(30.0))
-
-
 def steps_sign(phi: float, within: float = 30.0) -> int:
     """+1 / -1 for a flow ``phi`` within ``within`` degrees (30: a flow that lays a run,
     :meth:`RouteFollower.laying_run`, or can hook one, :meth:`RouteFollower.hooked`) of
-    +z / -z (along the steps), else 0."""
+    +z / -z (along the steps), else 0: |sin phi| >= cos(within)."""
     f_z = math.sin(phi)
-    along = _ALONG_STEPS if within == 30.0 else math.cos(math.radians(within))
-    return int(math.copysign(1.0, f_z)) if abs(f_z) >= along else 0
+    return int(math.copysign(1.0, f_z)) if abs(f_z) >= math.cos(math.radians(within)) else 0
 
 
 def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3) -> np.ndarray:

@@ -492,16 +492,22 @@ def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
     return npz, js
 
 
+def _statistics_arrays(stem: Path) -> dict[str, np.ndarray]:
+    """The arrays of ``<stem>.npz`` (:func:`save_vecnormalize`) as float64, unpickling
+    nothing."""
+    with np.load(stem.with_suffix(".npz"), allow_pickle=False) as d:
+        return {k: np.asarray(d[k], dtype=np.float64) for k in d.files}
+
+
 def load_vecnormalize(stem: Path) -> NormalizerStats:
     """The statistics written by :func:`save_vecnormalize` (for inference)."""
     stem = Path(stem)
     try:
         meta = json.loads(stem.with_suffix(".json").read_text())
-        with np.load(stem.with_suffix(".npz"), allow_pickle=False) as d:
-            return NormalizerStats(np.asarray(d["obs_mean"], dtype=np.float64),
-                                   np.asarray(d["obs_var"], dtype=np.float64),
-                                   float(d["obs_count"]), float(meta["clip_obs"]),
-                                   float(meta["epsilon"]), bool(meta["norm_obs"]))  # fmt: skip
+        a = _statistics_arrays(stem)
+        return NormalizerStats(a["obs_mean"], a["obs_var"], float(a["obs_count"]),
+                               float(meta["clip_obs"]), float(meta["epsilon"]),
+                               bool(meta["norm_obs"]))  # fmt: skip
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz/.json: {exc}"
         raise ValueError(msg) from exc
@@ -513,8 +519,7 @@ def restore_vecnormalize(venv, stem: Path) -> None:
     saved agent. Its settings (clip, gamma, ...) stay the venv's (the config's)."""
     stem = Path(stem)
     try:
-        with np.load(stem.with_suffix(".npz"), allow_pickle=False) as d:
-            arrays = {k: np.asarray(d[k], dtype=np.float64) for k in d.files}
+        arrays = _statistics_arrays(stem)
         obs_mean, ret_mean = arrays["obs_mean"], arrays["ret_mean"]
         obs_var, ret_var = arrays["obs_var"], arrays["ret_var"]
         obs_count, ret_count = float(arrays["obs_count"]), float(arrays["ret_count"])

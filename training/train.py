@@ -319,12 +319,13 @@ def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[s
     if) the config normalises. The spaces and ``policy_kwargs`` are checked by SB3 when it
     loads. Returns the record of the agent's earlier run (path, sha256, its ``run``)."""
     path = Path(path)
-    run = model_config(path).get("run")  # yaml.safe_load
+    resolved = model_config(path)  # yaml.safe_load
+    run = resolved.get("run")
     trained_algo = run.get("algo") if isinstance(run, dict) else None
     if trained_algo not in (None, algo):
         raise ValueError(f"{path.name} is a {trained_algo} agent; pass --algo {trained_algo}")
     check_model(path, algo)  # the manifest; nothing is unpickled
-    saved = model_config(path).get(ENV_ID)
+    saved = resolved.get(ENV_ID)
     if not isinstance(saved, dict):
         raise ValueError(f"{path.with_suffix('.yml')}, the resolved config cnt-train "
                          "writes beside a model, is missing: cannot tell what the agent "
