@@ -7,7 +7,7 @@ cnt-evaluate's default), on seven routes of other shapes that a circuit could as
 first leg down the steps (-z), a two-turn meander, a square ring back to its start, a
 diagonal against the flow, two keep-outs on alternate sides of a straight run, pads
 across a run along x, and a narrow corridor along the steps. Each is designed at
-w = 15 and scaled with the band like the held-out set (``ROUTE_SCALE``). It reports each
+w = 15 and scaled with the band like the held-out set (``routes.scale_design``). It reports each
 episode's score, progress and failure, so that a route family the task or the policies
 mishandle shows up.
 
@@ -30,12 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 def routes() -> dict[str, dict]:
     """The seven routes (dict format of ``reset(options={"target": ...})``)."""
-    from cnt_env.task.routes import ROUTE_SCALE
-
-    def sc(value):
-        if isinstance(value, list):
-            return [sc(v) for v in value]
-        return ROUTE_SCALE * float(value)
+    from cnt_env.task.routes import scale_design
 
     base = {
         "down_first": {"waypoints": [[0, 0], [0, -50], [60, -50], [60, -100]]},
@@ -53,15 +48,8 @@ def routes() -> dict[str, dict]:
         },
         "narrow_along_steps": {"waypoints": [[0, 0], [0, 80]], "width": 8.0},
     }
-    out = {}
-    for name, spec in base.items():
-        r = {"name": name, "width": sc(spec.get("width", 15.0)), "waypoints": sc(spec["waypoints"])}
-        if "keepouts" in spec:
-            r["keepouts"] = [{"rect": sc(k["rect"])} for k in spec["keepouts"]]
-        if "pads" in spec:
-            r["pads"] = sc(spec["pads"])
-        out[name] = r
-    return out
+    return {name: {"name": name, **scale_design({"width": 15.0, **spec})}
+            for name, spec in base.items()}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:

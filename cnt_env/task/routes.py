@@ -379,14 +379,17 @@ def _held_out_specs() -> dict[str, dict[str, Any]]:
         "band_fill": {"waypoints": [[0, 0], [100, 0]], "width": 18.0},
     }
 
-    def scaled(value: Any) -> Any:
-        if isinstance(value, dict):
-            return {k: scaled(v) for k, v in value.items()}
-        if isinstance(value, list):
-            return [scaled(v) for v in value]
-        return ROUTE_SCALE * float(value)
+    return {name: scale_design(spec) for name, spec in base.items()}
 
-    return {name: scaled(spec) for name, spec in base.items()}
+
+def scale_design(value: Any) -> Any:
+    """A route spec (dict format, numbers only) designed at w = 15, with every length
+    and width scaled by ROUTE_SCALE."""
+    if isinstance(value, dict):
+        return {k: scale_design(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [scale_design(v) for v in value]
+    return ROUTE_SCALE * float(value)
 
 
 #: Names of the held-out routes (evaluation only).
