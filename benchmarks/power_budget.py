@@ -66,13 +66,16 @@ def edge_drag_powers(sim, near: float) -> dict[str, float]:
     deposited = (j < c - 1) & on
     arc = np.concatenate([[0.0], np.cumsum(ln)])
     near_mask = suspended & (arc[1:] - arc[c] <= near)
-    return {
+    out = {
         "susp_axial": float(axial[suspended].sum()),
         "susp_normal": float(norm_[suspended].sum()),
         "susp_near": float((axial + norm_)[near_mask].sum()),
         "deposited": float((axial + norm_)[deposited].sum()),
         "flow_in": float(flow_in[on].sum()),
     }
+    # power the drag puts into the rod: the flow's power less the dissipation
+    out["into_rod"] = out["flow_in"] - out["susp_axial"] - out["susp_normal"] - out["deposited"]
+    return out
 
 
 def budget(preset: str, delta: float, transient: float, window: float, near: float,
@@ -94,7 +97,8 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
 
     l0, w0, time0 = sim.deposited_length, sim.vdw_work, sim.time
     e0 = mechanical()
-    sums = dict.fromkeys(("susp_axial", "susp_normal", "susp_near", "deposited", "flow_in"), 0.0)
+    sums = dict.fromkeys(("susp_axial", "susp_normal", "susp_near", "deposited", "flow_in",
+                          "into_rod"), 0.0)  # fmt: skip
     sticking0 = sim.sticking_loss
     # the events' energy jumps (module doc), each measured around the call that makes it
     jumps = dict.fromkeys(("snap", "deposit", "inject", "refine", "delete"), 0.0)
@@ -125,9 +129,7 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
         for k, v in powers.items():
             sums[k] += v * taken
         e_now = mechanical()
-        drag_in = powers["flow_in"] - sum(powers[k] for k in ("susp_axial", "susp_normal",
-                                                                "deposited"))  # fmt: skip
-        solve = (sim.vdw_work - w_prev + drag_in * taken
+        solve = (sim.vdw_work - w_prev + powers["into_rod"] * taken
                  - (e_now - e_prev - (sum(jumps.values()) - j_prev)))  # fmt: skip
         e_prev = e_now
         since = 0 if sim.deposited_length > laid_prev else since + 1
@@ -136,8 +138,7 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
     laid = sim.deposited_length - l0
     e1 = mechanical()
     vdw = sim.vdw_work - w0
-    dissipated = sums["susp_axial"] + sums["susp_normal"] + sums["deposited"]
-    into_rod = sums["flow_in"] - dissipated
+    rest = vdw + sums["into_rod"] - (e1 - e0)
     per = {k: v / laid for k, v in sums.items()}
     p = config.params
     return {
@@ -157,13 +158,13 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
         "drag_suspended_near_contact": per["susp_near"],
         "drag_deposited": per["deposited"],
         "flow_power_in": per["flow_in"],
-        "into_rod_by_drag": into_rod / laid,
+        "into_rod_by_drag": per["into_rod"],
         "mechanical_energy_change": (e1 - e0) / laid,
         "sticking_loss": (sim.sticking_loss - sticking0) / laid,
-        "rest": (vdw + into_rod - (e1 - e0)) / laid,
+        "rest": rest / laid,
         **{f"jump_{k}": v / laid for k, v in jumps.items()},
         # the implicit solves' own dissipation: rest = solve dissipation - event jumps
-        "solve_dissipation": (vdw + into_rod - (e1 - e0) + sum(jumps.values())) / laid,
+        "solve_dissipation": (rest + sum(jumps.values())) / laid,
         **{f"solve_dissipation_since_touchdown_{k}": v / laid for k, v in by_since.items()},
         "wall_s": round(time.perf_counter() - t0, 1),
     }

@@ -32,6 +32,7 @@ def test_drag_powers_are_the_solvers_drag_force() -> None:
                     d.sigma, d.c_sigma, force, no_jacobian, False, no_fixed)  # fmt: skip
     p = pb.edge_drag_powers(sim, near=5.0)
     into_rod = p["flow_in"] - p["susp_axial"] - p["susp_normal"] - p["deposited"]
+    assert p["into_rod"] == into_rod
     mask = np.ones(4 * n, bool)
     mask[3::4] = False  # theta DOFs carry no drag
     expected = float(force[mask] @ u[mask])
