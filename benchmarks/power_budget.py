@@ -30,6 +30,7 @@ Linear drag law only (the model's). Every figure is per unit length laid, in e_v
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -39,6 +40,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from cnt_env.sim.deposition import ContactOptions  # noqa: E402
 
 
 def edge_drag_powers(sim, near: float) -> dict[str, float]:
@@ -148,6 +151,8 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
         "phi": p.phi,
         "seed": seed,
         "dt_factor": config.dt_factor,
+        "adhesion": config.contact.adhesion,
+        "cohesive_range": config.contact.cohesive_range if sim.cohesive else None,
         "transient": transient,
         "laid": laid,
         "near": near,
@@ -191,22 +196,39 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="time step factor (default: the preset's, 0.05)",
     )
+    ap.add_argument(
+        "--adhesion",
+        default="eq1",
+        choices=("eq1", "cohesive"),
+        help="the adhesion model (deposition.ContactOptions.adhesion)",
+    )
+    ap.add_argument(
+        "--cohesive-range",
+        default="0.05",
+        help="comma separated ranges h of the cohesive adhesion, L_vb",
+    )
     ap.add_argument("--out", type=Path, default=None, help="append JSON lines here")
     args = ap.parse_args(argv)
     transient = args.transient
     if transient is None:
         transient = 150.0 if args.preset == "serpentine" else 300.0
     vbars = [None] if args.vbar is None else [float(v) for v in args.vbar.split(",")]
-    for delta in (float(d) for d in args.delta.split(",")):
-        for vbar in vbars:
-            changes = {} if vbar is None else {"vbar": vbar}
-            if args.dt_factor is not None:
-                changes["dt_factor"] = args.dt_factor
-            row = budget(args.preset, delta, transient, args.window, args.near, **changes)
-            print(json.dumps(row))
-            if args.out is not None:
-                with args.out.open("a") as f:
-                    f.write(json.dumps(row) + "\n")
+    ranges = (
+        [None] if args.adhesion == "eq1" else [float(h) for h in args.cohesive_range.split(",")]
+    )
+    for delta, vbar, h in itertools.product(
+        [float(d) for d in args.delta.split(",")], vbars, ranges
+    ):
+        changes: dict = {} if vbar is None else {"vbar": vbar}
+        if args.dt_factor is not None:
+            changes["dt_factor"] = args.dt_factor
+        if h is not None:
+            changes["contact"] = ContactOptions(adhesion="cohesive", cohesive_range=h)
+        row = budget(args.preset, delta, transient, args.window, args.near, **changes)
+        print(json.dumps(row))
+        if args.out is not None:
+            with args.out.open("a") as f:
+                f.write(json.dumps(row) + "\n")
     return 0
 
 

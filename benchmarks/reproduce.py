@@ -93,6 +93,18 @@ CANDIDATES: dict[str, dict[str, Any]] = {
         "tail_clamp": "xyz",
         "delta_bar": 0.2,
     },
+    # C_fine with the cohesive adhesion (docs/model.md §4): the vdW pull of finite range
+    # on every free node near the substrate instead of eq. 1's jump from node to node
+    "C_cohesive": {
+        "drag_law": "linear",
+        "sliding": "C",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+        "delta_bar": 0.2,
+        "adhesion": "cohesive",
+        "cohesive_range": 0.05,
+    },
     "printed_C": {
         "drag_law": "printed",
         "sliding": "C",
@@ -272,11 +284,13 @@ def point_config(point: dict[str, Any], candidate: str, dt_factor: float | None)
 
     changes = dict(CANDIDATES[candidate])
     if point["preset"] == COIL:  # stepped-substrate options but the drag law, contact, delta
-        keep = ("drag_law", "contact_mode", "delta_bar")
+        keep = ("drag_law", "contact_mode", "delta_bar", "adhesion", "cohesive_range")
         changes = {k: v for k, v in changes.items() if k in keep}
-    mode = changes.pop("contact_mode", None)
-    if mode is not None:
-        changes["contact"] = ContactOptions(mode=mode)
+    contact = {k: changes.pop(f)
+               for k, f in (("mode", "contact_mode"), ("adhesion", "adhesion"),
+                            ("cohesive_range", "cohesive_range")) if f in changes}  # fmt: skip
+    if contact:
+        changes["contact"] = ContactOptions(**contact)
     if dt_factor is not None:
         changes["dt_factor"] = dt_factor
     changes.update(point["groups"])
@@ -403,6 +417,8 @@ def run_point(
         "max_edge_rotation": cfg.newton.max_edge_rotation,
         "lagged_jacobian": cfg.newton.lagged_jacobian,
         "contact_mode": cfg.contact.mode,
+        "adhesion": cfg.contact.adhesion,
+        "cohesive_range": cfg.contact.cohesive_range if cfg.contact.adhesion != "eq1" else None,
         "deposit": length,
         "transient": transient,
         "error": error,

@@ -68,6 +68,7 @@ __all__ = [
 # validates them again when it is built.
 DRAG_LAWS = ("linear", "printed")
 CONTACT_MODES = ("event", "project")
+ADHESION_MODELS = ("eq1", "cohesive")  # forces.ADHESION_MODELS
 SLIDING_OPTIONS = ("B", "C")
 SUBSTRATES = ("flat", "stepped")
 
@@ -267,6 +268,8 @@ class RunOptions:
     coarse_delta: float | None = None
     fine_length: float | None = None
     contact_mode: str = "event"
+    adhesion: str | None = None  # None: deposition.ContactOptions's default
+    cohesive_range: float | None = None
     initial_radius: float | None = None
     limits: Limits = field(default_factory=Limits)
 
@@ -301,6 +304,8 @@ class RunSpec:
             "fine_length": c.fine_length,
             "residual_tol": c.newton.residual_tol,
             "contact_mode": c.contact.mode,
+            "adhesion": c.contact.adhesion,
+            "cohesive_range": c.contact.cohesive_range,
             "seed": self.seed,
             "initial_radius": c.initial_radius,
             "perturbation": c.perturbation,
@@ -331,6 +336,17 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
     _choice("--drag-law", opts.drag_law, DRAG_LAWS)
     _choice("--sliding", opts.sliding, SLIDING_OPTIONS)
     _choice("--contact-mode", opts.contact_mode, CONTACT_MODES)
+    contact: dict[str, Any] = {"mode": opts.contact_mode}
+    if opts.adhesion is not None:
+        _choice("--adhesion", opts.adhesion, ADHESION_MODELS)
+        contact["adhesion"] = opts.adhesion
+    if opts.cohesive_range is not None:
+        try:
+            contact["cohesive_range"] = units.check_number(
+                "--cohesive-range", opts.cohesive_range, low=0.0, low_open=True,
+                unit="(range of the cohesive adhesion in L_vb)")  # fmt: skip
+        except units.ParameterError as exc:
+            raise RunInputError(str(exc)) from exc
     groups = dict(opts.groups)
     if groups.get("kappa_c_bar") is not None and opts.substrate == "flat":
         raise RunInputError(
@@ -383,7 +399,7 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
     try:
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,
-            contact=ContactOptions(mode=opts.contact_mode), initial_radius=radius,
+            contact=ContactOptions(**contact), initial_radius=radius,
             sliding=opts.sliding, coarse_delta=coarse,
             fine_length=mesh["fine_length"] if opts.fine_length is None else opts.fine_length,
         )  # fmt: skip

@@ -100,6 +100,13 @@ def test_run_json_prints_one_object_with_every_key(tiny_run: dict) -> None:
     assert result["measure"]["pattern"] == result["pattern"]
 
 
+def test_run_with_the_cohesive_adhesion_records_it(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["run", *TINY, "--adhesion", "cohesive", "--cohesive-range", "1.5",
+                     "--json"]) == 0  # fmt: skip
+    config = _strict_json(capsys.readouterr().out)["config"]
+    assert config["adhesion"] == "cohesive" and config["cohesive_range"] == 1.5
+
+
 def test_run_json_params_round_trip(tiny_run: dict) -> None:
     result = _strict_json(tiny_run["stdout"])
     assert units.DimensionlessParams(**result["params"]) == units.paper_groups("coil", Hbar=40.0)
@@ -158,6 +165,9 @@ def test_human_summary_and_demo(tmp_path: Path, capsys: pytest.CaptureFixture[st
         (["--kb", "-1"], ["--kb", "k_b"]),
         (["--ev", "nan"], ["--ev", "e_v"]),
         (["--deposit", "nan"], ["--deposit"]),
+        (["--cohesive-range", "0"], ["--cohesive-range"]),
+        (["--cohesive-range", "nan"], ["--cohesive-range"]),
+        (["--adhesion", "cohesive", "--cohesive-range", "0.01"], ["cohesive range", "delta_bar"]),
         (["--dt", "-1"], ["--dt"]),
         (["--transient", "-5"], ["--transient"]),
     ],

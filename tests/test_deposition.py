@@ -74,6 +74,48 @@ def test_snapshot_restore_continues_bit_identically() -> None:
     assert other.time == t_a
 
 
+def test_cohesive_adhesion_hands_over_and_releases_ev_per_length() -> None:
+    """The cohesive model (ContactOptions.adhesion): several free nodes are pulled at once
+    (the handover is continuous), every deposited node lies on y = 0, the adhesion
+    releases e_v per unit length laid (its energy is exact: the work is its fall), and
+    the kinetic energy discarded by landing nodes is a small part of it."""
+    params = paper_groups("coil", Hbar=30.0, Ibar=200.0, delta_bar=0.1)
+    contact = ContactOptions(adhesion="cohesive", cohesive_range=0.05)
+    sim = DepositionSim(DepositionConfig(params=params, initial_radius=4.0, contact=contact), 0)
+    sim.run(2.0)  # past the start-up arc, whose nodes begin inside the range
+    w0, l0, k0 = sim.vdw_work, sim.deposited_length, sim.sticking_loss
+    pulled = []  # free nodes within the range after each step
+    while sim.deposited_length < 8.0:
+        sim.step()
+        pulled.append(int(np.sum(sim.rod.nodes[sim.contact_node :, 1] < 0.05)))
+    assert np.median(pulled) >= 2 and min(pulled) >= 1
+    np.testing.assert_array_equal(sim.trace()[:, 1], 0.0)
+    laid = sim.deposited_length - l0
+    assert (sim.vdw_work - w0) / laid == pytest.approx(1.0, abs=0.03)
+    assert (sim.sticking_loss - k0) / laid < 0.02
+    again = DepositionSim(DepositionConfig(params=params, initial_radius=4.0, contact=contact), 0)
+    again.run(sim.deposited_length)
+    np.testing.assert_array_equal(again.trace(), sim.trace())
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [({"adhesion": "glue"}, "adhesion"), ({"cohesive_range": 0.0}, "cohesive_range"),
+     ({"cohesive_range": float("nan")}, "cohesive_range")],
+)  # fmt: skip
+def test_bad_adhesion_options_are_refused(kw: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        ContactOptions(**kw)
+
+
+def test_cohesive_range_the_mesh_cannot_resolve_is_refused() -> None:
+    contact = ContactOptions(adhesion="cohesive", cohesive_range=0.02)
+    with pytest.raises(ValueError, match="not resolved by delta_bar"):
+        small_config(contact=contact)  # delta_bar 1
+    params = paper_groups("coil", Hbar=30.0, Ibar=200.0, delta_bar=0.1)
+    DepositionConfig(params=params, initial_radius=4.0, contact=contact)  # 0.02 >= 0.01
+
+
 @pytest.mark.parametrize("mode", ["event", "project"])
 def test_contact_modes_both_run(mode: str) -> None:
     sim = DepositionSim(small_config(contact=ContactOptions(mode=mode)), seed=0)

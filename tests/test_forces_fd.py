@@ -6,7 +6,17 @@ import numpy as np
 import pytest
 
 from cnt_env.rod.banded import KL, KU, LDAB
-from cnt_env.sim.forces import add_linear_drag, add_printed_drag, add_vdw
+from cnt_env.sim.forces import (
+    ADHESION_COHESIVE,
+    add_adhesion,
+    add_linear_drag,
+    add_printed_drag,
+    add_vdw,
+    adhesion_energy,
+    cohesive_energy,
+    cohesive_pull,
+    voronoi_weight,
+)
 from tests.rodkit import random_rod
 
 NO_FIXED = np.zeros(0, dtype=np.uint8)  # every Jacobian entry assembled
@@ -146,3 +156,75 @@ def test_vdw_releases_ev_delta_from_beta0_to_zero() -> None:
 
     work, _ = quad(pull, 0.0, delta * np.sin(beta0), epsabs=1e-13)
     assert work == pytest.approx(e_v * delta, rel=1e-9)
+
+
+# ---- the cohesive adhesion (forces.cohesive_pull / add_cohesive, docs/model.md §4) ----
+COH_H, COH_EV = 0.05, 1.3
+
+
+@pytest.mark.parametrize("y", [0.049, 0.03, 0.011, 1e-4, -0.004])
+def test_cohesive_pull_is_minus_energy_gradient_and_jacobian_matches_fd(y: float) -> None:
+    w = 0.37
+    f, dfdy = cohesive_pull(y, w, COH_H, COH_EV)
+    e = lambda yy: cohesive_energy(yy, w, COH_H, COH_EV)  # noqa: E731
+    assert f == pytest.approx(-(e(y + H_FD) - e(y - H_FD)) / (2 * H_FD), rel=1e-6)
+    fd = (cohesive_pull(y + H_FD, w, COH_H, COH_EV)[0]
+          - cohesive_pull(y - H_FD, w, COH_H, COH_EV)[0]) / (2 * H_FD)  # fmt: skip
+    assert dfdy == pytest.approx(fd, rel=1e-6, abs=1e-9)
+
+
+def test_cohesive_pull_releases_ev_per_length_and_enters_continuously() -> None:
+    """From the edge of the range down to y = 0 a node releases e_v times the length it
+    stands for; the pull is zero at y = h (no step load on entry) and outside."""
+    from scipy.integrate import quad
+
+    w = 0.21
+    work, _ = quad(lambda y: -cohesive_pull(y, w, COH_H, COH_EV)[0], 0.0, COH_H, epsabs=1e-14)
+    assert work == pytest.approx(COH_EV * w, rel=1e-10)
+    assert cohesive_energy(0.0, w, COH_H, COH_EV) == pytest.approx(-COH_EV * w, rel=1e-14)
+    assert cohesive_pull(COH_H * (1 - 1e-9), w, COH_H, COH_EV)[0] == pytest.approx(0, abs=1e-6)
+    assert cohesive_pull(COH_H, w, COH_H, COH_EV) == (0.0, 0.0)
+    assert cohesive_pull(3.0, w, COH_H, COH_EV) == (0.0, 0.0)
+
+
+def test_add_cohesive_pulls_free_nodes_in_range_with_their_lengths() -> None:
+    """Against finite differences of the summed energy: every node from the contact
+    node up, below the range, weighted by half of each rest edge beside it; the nodes
+    below the contact node (deposited) and above the range feel nothing."""
+    n = 6
+    rest = np.array([0.2, 0.2, 0.25, 0.3, 0.4])
+    ys = [0.0, 0.01, 0.02, 0.035, 0.3, 0.01]  # node 5 (the top) in range again
+    q = np.zeros(4 * n - 1)
+    q[1::4] = ys
+    vdw = np.array([1.0, 1.0, 1.0, 0.05, COH_EV, ADHESION_COHESIVE, COH_H])
+    f = np.zeros(q.size)
+    ab = np.zeros((LDAB, q.size))
+    add_adhesion(q, n, rest, vdw, f, ab, True)
+    for i in range(n):
+        k = 4 * i + 1
+        qp, qm = q.copy(), q.copy()
+        qp[k] += H_FD
+        qm[k] -= H_FD
+        fd = -(adhesion_energy(qp, n, rest, vdw) - adhesion_energy(qm, n, rest, vdw)) / (2 * H_FD)
+        assert f[k] == pytest.approx(fd, rel=1e-6, abs=1e-9), i
+        w = voronoi_weight(rest, n, i)
+        expect = 0.0 if (i < 1 or ys[i] >= COH_H) else 2 * COH_EV * w / COH_H**2
+        assert ab[KL + KU, k] == pytest.approx(-expect, rel=1e-12)
+    assert f[1] == 0.0 and f[4 * 4 + 1] == 0.0  # deposited node 0; node 4 above the range
+    assert voronoi_weight(rest, n, 5) == pytest.approx(0.2)  # the top: half its one edge
+    np.testing.assert_array_equal(np.delete(f, np.arange(1, q.size, 4)), 0.0)  # y only
+
+
+def test_add_adhesion_eq1_is_add_vdw_bit_for_bit() -> None:
+    q = np.zeros(11)
+    q[9] = 0.3
+    vdw = np.array([2.0, 0.4, 1.0, 0.05, 1.3, 0.0, 0.05])  # VDW_MODEL 0: eq. 1
+    f_a, f_b = np.zeros(11), np.zeros(11)
+    ab_a, ab_b = np.zeros((LDAB, 11)), np.zeros((LDAB, 11))
+    add_adhesion(q, 3, np.ones(2), vdw, f_a, ab_a, True)
+    add_vdw(q, vdw, f_b, ab_b)
+    np.testing.assert_array_equal(f_a, f_b)
+    np.testing.assert_array_equal(ab_a, ab_b)
+    f_c = np.zeros(11)
+    add_adhesion(q, 3, np.ones(2), vdw, f_c, ab_a, False)  # residual only
+    np.testing.assert_array_equal(f_c, f_b)

@@ -35,7 +35,7 @@ from typing import Any
 
 from cnt_env.io import package_version, to_jsonable
 from cnt_env.presets import MESH, MODEL
-from cnt_env.runs import CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
+from cnt_env.runs import ADHESION_MODELS, CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
 
 PROG = "cnt-sim"
 DIST_NAME = "cnt-env"
@@ -202,6 +202,21 @@ def add_model_arguments(m: Any) -> None:
         f"{MESH['serpentine']['fine_length']:g})",
     )
     m.add_argument("--contact-mode", choices=CONTACT_MODES, default="event")
+    m.add_argument(
+        "--adhesion",
+        choices=ADHESION_MODELS,
+        default=None,
+        help="vdW adhesion: eq1, the paper's pull on the contact node, or cohesive, a pull "
+        "of finite range on every free node near the substrate (default: eq1; "
+        "docs/model.md §4)",
+    )
+    m.add_argument(
+        "--cohesive-range",
+        type=float,
+        default=None,
+        metavar="H",
+        help="range of the cohesive adhesion, L_vb (default: 0.05)",
+    )
     m.add_argument(
         "--initial-radius",
         type=float,

@@ -49,6 +49,8 @@ def run_options(args: argparse.Namespace) -> runs.RunOptions:
         coarse_delta=args.coarse_delta,
         fine_length=args.fine_length,
         contact_mode=args.contact_mode,
+        adhesion=args.adhesion,
+        cohesive_range=args.cohesive_range,
         initial_radius=args.initial_radius,
         limits=runs.Limits(
             max_nodes=args.max_nodes,
@@ -81,7 +83,8 @@ def format_summary(result: Mapping[str, Any], written: Sequence[Path] = ()) -> s
         f"{c.get('substrate', 'flat')} substrate",
         f"  Hbar={_fmt(p['Hbar'])} Ibar={_fmt(p['Ibar'])} vbar={_fmt(p['vbar'])} "
         f"phi={_fmt(p['phi'])} delta_bar={_fmt(p['delta_bar'])} dt={_fmt(c.get('dt'))} "
-        f"drag={c.get('drag_law')} contact={c.get('contact_mode')} sliding={c.get('sliding')}",
+        f"drag={c.get('drag_law')} contact={c.get('contact_mode')} "
+        f"adhesion={c.get('adhesion', 'eq1')} sliding={c.get('sliding')}",
         f"deposited {_fmt(result['deposited_length'], '.1f')} L_vb in {result['steps']} steps "
         f"({result['newton_iterations']} Newton iterations), "
         f"t = {_fmt(result['sim_time'])} tau, wall {_fmt(result['wall_time_s'], '.1f')} s",
@@ -255,6 +258,7 @@ CONFIG_KEYS: dict[str, str] = {
     "transient": "transient", "transient_length": "transient",
     "drag_law": "drag_law", "sliding": "sliding", "coarse_delta": "coarse_delta",
     "fine_length": "fine_length", "contact_mode": "contact_mode",
+    "adhesion": "adhesion", "cohesive_range": "cohesive_range",
     "initial_radius": "initial_radius", "max_nodes": "max_nodes", "max_steps": "max_steps",
     "max_wall_time": "max_wall_time",
     **{dest: dest for dest in runs.GROUP_FIELDS},

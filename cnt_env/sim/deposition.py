@@ -26,11 +26,15 @@ from numba import njit
 
 from cnt_env.presets import MODEL, NEWTON, STEP_HBAR_CAP
 from cnt_env.sim.forces import (
+    ADHESION_MODELS,
     VDW_BETA0,
     VDW_CLAMP,
     VDW_DELTA,
     VDW_ENERGY,
+    VDW_MODEL,
     VDW_NODE,
+    VDW_RANGE,
+    adhesion_energy,
     vdw_pull,
 )
 from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial, SimulationError
@@ -52,6 +56,13 @@ class ContactOptions:
     * ``sqrt_clamp``: sqrt(delta^2 - y_c^2) is clamped below at this times delta.
     * A contact node is deposited once y_c <= ``event_tol * delta * sin(beta0)`` (the
       vdW energy it still holds is then below 1% of e_v delta).
+    * ``adhesion`` [choice]: ``"eq1"`` (default), the paper's eq. 1, a pull on the
+      contact node alone that jumps to the next node when it lands; ``"cohesive"``, a
+      pull of finite range ``cohesive_range`` (L_vb) on every free node below that
+      height (forces.cohesive_pull), which hands over from node to node continuously.
+      Both release e_v per unit length laid. With ``"cohesive"`` a contact node is
+      deposited once y_c <= ``event_tol * cohesive_range``; ``beta0_min`` and
+      ``sqrt_clamp`` apply to eq. 1 alone.
     """
 
     mode: str = "event"
@@ -59,10 +70,19 @@ class ContactOptions:
     sqrt_clamp: float = 0.05
     event_tol: float = 0.01
     max_event_iterations: int = 30
+    adhesion: str = "eq1"
+    cohesive_range: float = 0.05
 
     def __post_init__(self) -> None:
         if self.mode not in CONTACT_MODES:
             raise ValueError(f"contact mode must be one of {CONTACT_MODES}, got {self.mode!r}")
+        if self.adhesion not in ADHESION_MODELS:
+            raise ValueError(f"adhesion must be one of {tuple(ADHESION_MODELS)}, "
+                             f"got {self.adhesion!r}")  # fmt: skip
+        h = self.cohesive_range
+        if not (isinstance(h, (int, float)) and math.isfinite(h) and h > 0):
+            raise ValueError(f"ContactOptions.cohesive_range must be finite and > 0 (L_vb), "
+                             f"got {h!r}")  # fmt: skip
         for name in ("beta0_min", "sqrt_clamp", "event_tol"):
             v = getattr(self, name)
             if not (math.isfinite(v) and 0 < v < 1):
@@ -146,6 +166,15 @@ class DepositionConfig:
             )
         if self.initial_radius >= p.Hbar:
             raise ValueError("initial_radius must be below Hbar")
+        if self.contact.adhesion == "cohesive" and self.contact.cohesive_range < p.delta_bar**2:
+            # a rod leaving the substrate with a curvature ~1 / L_vb rises ~delta^2 / 2 over
+            # its first edge: a shorter range leaves the contact node out of reach and the
+            # deposition stalls (coil, h = 0.02 at delta 0.2: the node hovers at y ~ 0.025)
+            raise ValueError(
+                f"the cohesive range {self.contact.cohesive_range:g} L_vb is not resolved "
+                f"by delta_bar = {p.delta_bar:g}: it must be at least delta_bar^2 = "
+                f"{p.delta_bar**2:g}; refine delta_bar or widen cohesive_range"
+            )
         # the solved rod: the suspended part (~Hbar + the start-up arc, at the injection
         # spacing) and the deposited tail; refuse before allocating what cannot run
         if not (isinstance(self.max_nodes, int) and self.max_nodes >= 16):
@@ -272,6 +301,9 @@ class DepositionSim:
         self.rod.vdw[VDW_DELTA] = self.delta
         self.rod.vdw[VDW_CLAMP] = config.contact.sqrt_clamp
         self.rod.vdw[VDW_ENERGY] = p.vdw_energy
+        self.cohesive = config.contact.adhesion == "cohesive"
+        self.rod.vdw[VDW_MODEL] = ADHESION_MODELS[config.contact.adhesion]
+        self.rod.vdw[VDW_RANGE] = config.contact.cohesive_range
         self.n_deposited = 0
         self.snapped = np.zeros(self.rod.max_nodes, dtype=bool)  # per rod edge (stepped)
         self.snaps = 0
@@ -326,6 +358,12 @@ class DepositionSim:
         the vdW force on the new contact node with its beta0 (docs/model.md §4)."""
         cfg = self.config.contact
         rod = self.rod
+        if self.cohesive:  # every free node in range is pulled: deposit those that landed
+            while (self.contact_node < rod.n_nodes - 2
+                   and rod.q[4 * self.contact_node + 1] <= self._landing_tol()):  # fmt: skip
+                self._deposit(self.contact_node)
+            rod.vdw[VDW_NODE] = self.contact_node
+            return
         armed = self.contact_node
         while self.contact_node < rod.n_nodes - 2:
             c = self.contact_node
@@ -448,7 +486,8 @@ class DepositionSim:
         cfg = self.config.contact
         k_y = 4 * self.contact_node + 1
         y_before = rod.q[k_y]
-        f_before = self._vdw_force(y_before)
+        f_before = 0.0 if self.cohesive else self._vdw_force(y_before)
+        e_before = self._adhesion_energy()
         state = self._light_state() if cfg.mode == "event" else None
         rod.step(dt)
         taken = dt
@@ -493,8 +532,10 @@ class DepositionSim:
                     rod.step(hi)
                     taken = hi
         y_after = rod.q[k_y]
-        # vdW work over the step (trapezoid in y): the energy the adhesion released
-        self.vdw_work += 0.5 * (f_before + self._vdw_force(y_after)) * (y_after - y_before)
+        if self.cohesive:  # the adhesion's energy is exact: its work is its fall
+            self.vdw_work += e_before - self._adhesion_energy()
+        else:  # vdW work over the step (trapezoid in y): the energy the adhesion released
+            self.vdw_work += 0.5 * (f_before + self._vdw_force(y_after)) * (y_after - y_before)
         self.time = rod.time
         if len(self.snapped) < rod.max_nodes:
             self.snapped = np.concatenate(
@@ -510,8 +551,17 @@ class DepositionSim:
     def _landing_tol(self) -> float:
         """|y_c| within which a touchdown counts as landed: relative to the contact node's
         start height delta sin(beta0), since an overshoot below 0 adds
-        (e_v delta / beta0) |beta| of spurious vdW work."""
+        (e_v delta / beta0) |beta| of spurious vdW work. Cohesive: relative to the range."""
+        if self.cohesive:
+            return self.config.contact.event_tol * self.config.contact.cohesive_range
         return self.config.contact.event_tol * self.delta * math.sin(max(self.beta0, 1e-12))
+
+    def _adhesion_energy(self) -> float:
+        """The cohesive model's adhesion energy now (0 for eq. 1, whose work is summed)."""
+        if not self.cohesive:
+            return 0.0
+        r = self.rod
+        return adhesion_energy(r.q, r.n_nodes, r.rest_lengths, r.vdw)
 
     def _vdw_force(self, y: float) -> float:
         """F_y on the contact node at height y (forces.vdw_pull, as in the solve)."""

@@ -169,7 +169,11 @@ def add_substrate(
 
 
 # layout of the vdW parameter vector the stepper carries (Rod.vdw)
-VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY = range(5)
+VDW_NODE, VDW_BETA0, VDW_DELTA, VDW_CLAMP, VDW_ENERGY, VDW_MODEL, VDW_RANGE = range(7)
+# adhesion models (VDW_MODEL; deposition.ContactOptions.adhesion, docs/model.md §4)
+ADHESION_EQ1 = 0  # paper eq. 1: a pull on the contact node alone (default)
+ADHESION_COHESIVE = 1  # a finite-range pull on every free node near the substrate
+ADHESION_MODELS = {"eq1": ADHESION_EQ1, "cohesive": ADHESION_COHESIVE}
 
 
 @njit(cache=True)
@@ -206,6 +210,103 @@ def add_vdw(q: np.ndarray, vdw: np.ndarray, force: np.ndarray, ab: np.ndarray) -
     f, dfdy = vdw_pull(q[k], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
     force[k] += f
     ab[_DIAG, k] -= dfdy
+
+
+@njit(cache=True)
+def cohesive_pull(y: float, weight: float, h: float, e_v: float) -> tuple[float, float]:
+    """Vertical adhesive force F_y on a free node at height y that stands for ``weight``
+    of rod length, and dF_y/dy (the cohesive adhesion model, docs/model.md §4).
+
+    E = -e_v weight phi(y / h) with phi(u) = (1 - u)^2 on [0, 1] and 0 above: the node
+    releases exactly e_v weight on its way from y = h down to y = 0, and the pull
+    F_y = -(2 e_v weight / h)(1 - y / h) rises from 0 at the edge of the range, so a
+    node enters the pull continuously. Below y = 0 (an overshoot before the node is
+    deposited) the pull keeps its contact value, phi = 1 - 2u."""
+    if y >= h:
+        return 0.0, 0.0
+    c = 2.0 * e_v * weight / h
+    if y <= 0.0:
+        return -c, 0.0
+    return -c * (1.0 - y / h), c / h
+
+
+@njit(cache=True)
+def cohesive_energy(y: float, weight: float, h: float, e_v: float) -> float:
+    """The energy E of :func:`cohesive_pull` (F_y = -dE/dy)."""
+    if y >= h:
+        return 0.0
+    u = y / h
+    if u <= 0.0:
+        return -e_v * weight * (1.0 - 2.0 * u)
+    return -e_v * weight * (1.0 - u) * (1.0 - u)
+
+
+@njit(cache=True)
+def voronoi_weight(rest_lengths: np.ndarray, n_nodes: int, i: int) -> float:
+    """The rod length node i stands for: half of each rest edge beside it."""
+    w = 0.0
+    if i >= 1:
+        w += 0.5 * rest_lengths[i - 1]
+    if i < n_nodes - 1:
+        w += 0.5 * rest_lengths[i]
+    return w
+
+
+@njit(cache=True)
+def add_cohesive(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, vdw: np.ndarray,
+                 force: np.ndarray, ab: np.ndarray, with_jacobian: bool) -> None:  # fmt: skip
+    """Add the cohesive pull (:func:`cohesive_pull`, range ``vdw[VDW_RANGE]``) on every
+    free node from the contact node c = ``vdw[VDW_NODE]`` to the top, and -dF_y/dy to
+    the residual Jacobian. Nodes above the range feel nothing, so the pull hands over
+    from one node to the next continuously as the rod rolls onto the substrate."""
+    first = int(vdw[VDW_NODE])
+    if first < 0:
+        return
+    h = vdw[VDW_RANGE]
+    e_v = vdw[VDW_ENERGY]
+    for i in range(first, n_nodes):
+        k = 4 * i + 1
+        if q[k] >= h:
+            continue
+        f, dfdy = cohesive_pull(q[k], voronoi_weight(rest_lengths, n_nodes, i), h, e_v)
+        force[k] += f
+        if with_jacobian:
+            ab[_DIAG, k] -= dfdy
+
+
+@njit(cache=True)
+def adhesion_energy(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray,
+                    vdw: np.ndarray) -> float:  # fmt: skip
+    """The cohesive model's energy summed over the nodes :func:`add_cohesive` pulls."""
+    first = int(vdw[VDW_NODE])
+    if first < 0:
+        return 0.0
+    total = 0.0
+    for i in range(first, n_nodes):
+        y = q[4 * i + 1]
+        if y < vdw[VDW_RANGE]:
+            total += cohesive_energy(y, voronoi_weight(rest_lengths, n_nodes, i),
+                                     vdw[VDW_RANGE], vdw[VDW_ENERGY])  # fmt: skip
+    return total
+
+
+@njit(cache=True)
+def add_adhesion(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, vdw: np.ndarray,
+                 force: np.ndarray, ab: np.ndarray, with_jacobian: bool) -> None:  # fmt: skip
+    """The vdW adhesion of the model ``vdw[VDW_MODEL]``: paper eq. 1 (:func:`add_vdw`)
+    or the cohesive pull (:func:`add_cohesive`)."""
+    if int(vdw[VDW_MODEL]) == ADHESION_COHESIVE:
+        add_cohesive(q, n_nodes, rest_lengths, vdw, force, ab, with_jacobian)
+        return
+    node = int(vdw[VDW_NODE])
+    if node < 0:
+        return
+    if with_jacobian:
+        add_vdw(q, vdw, force, ab)
+        return
+    k = 4 * node + 1  # add_vdw without its Jacobian entry
+    f, _ = vdw_pull(q[k], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
+    force[k] += f
 
 
 @njit(cache=True)

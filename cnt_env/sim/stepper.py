@@ -55,16 +55,10 @@ from cnt_env.rod.banded import (
 from cnt_env.sim.forces import (
     DRAG_LAWS,
     DRAG_LINEAR,
-    VDW_BETA0,
-    VDW_CLAMP,
-    VDW_DELTA,
-    VDW_ENERGY,
-    VDW_NODE,
+    add_adhesion,
     add_linear_drag,
     add_printed_drag,
     add_substrate,
-    add_vdw,
-    vdw_pull,
 )
 
 _DIAG = KL + KU
@@ -291,7 +285,7 @@ def assemble(
         for c in range(n_dof):
             for r in range(LDAB):
                 ab[r, c] += ab_soft[r, c]
-    add_vdw(q, vdw, force, ab)
+    add_adhesion(q, n_nodes, rest_lengths, vdw, force, ab, True)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
     res = 0.0
     for k in range(n_dof):
@@ -356,11 +350,7 @@ def residual(
     else:
         add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
                          force, ab, False, fixed)  # fmt: skip
-    node = int(vdw[VDW_NODE])
-    if node >= 0:  # forces.add_vdw without its Jacobian entry
-        kc = 4 * node + 1
-        f, _ = vdw_pull(q[kc], vdw[VDW_BETA0], vdw[VDW_DELTA], vdw[VDW_CLAMP], vdw[VDW_ENERGY])
-        force[kc] += f
+    add_adhesion(q, n_nodes, rest_lengths, vdw, force, ab, False)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, False)
     res = 0.0
     for k in range(n_dof):
@@ -776,7 +766,7 @@ class Rod:
         self._allocate(cap)
         self.flow = np.zeros(3)
         # vdW contact, laid out as forces.VDW_*: node -1 means no contact force
-        self.vdw = np.array([-1.0, 1.0, 1.0, 0.05, 1.0])
+        self.vdw = np.array([-1.0, 1.0, 1.0, 0.05, 1.0, 0.0, 0.05])
         self.time = 0.0
         self.steps = 0
         self.newton_iterations = 0

@@ -36,7 +36,7 @@ def rod_case(newton=None) -> dict:
               drag=DragParams(mu=1.0), options=newton, max_nodes=n + 2)  # fmt: skip
     rod.fix_node(0)
     rod.fix_theta(0)
-    rod.vdw[:] = (1.0, 0.5, 1.0, 0.05, 1.0)  # node 1 pulled down (forces.VDW_*)
+    rod.vdw[:5] = (1.0, 0.5, 1.0, 0.05, 1.0)  # node 1 pulled down by eq. 1 (forces.VDW_*)
     iters = []
     for k in range(160):
         rod.flow[:] = (0.02 * np.cos(0.05 * k), 0.0, 0.02 * np.sin(0.07 * k))

@@ -1,0 +1,57 @@
+"""The cohesive adhesion's convergence: the coil's R0 against its range h and the mesh.
+
+The cohesive pull (docs/model.md §4, ``ContactOptions.adhesion="cohesive"``) has one
+length of its own, the range h of the vdW attraction. This runs the coil point of the
+reproduction table (``reproduce.py``, 1500 L_vb with 900 dropped) with the candidate
+``C_cohesive`` at each ``h:delta`` given, and ``eq1:delta`` for eq. 1 (candidate
+``C_fine`` at that delta), one JSON line per point:
+
+    python benchmarks/cohesive_study.py 0.2:0.2 0.1:0.2 0.05:0.2 0.05:0.1 0.025:0.1 \
+        0.05:0.05 --out benchmarks/results/cohesive_study.jsonl
+
+(A range below delta^2 is refused by DepositionConfig: the mesh cannot resolve it.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks import reproduce  # noqa: E402
+
+
+def coil_point(h: float | None, delta: float) -> dict:
+    """R0 of the coil point with the cohesive range ``h`` (None: eq. 1) at ``delta``."""
+    base = "C_fine" if h is None else "C_cohesive"
+    name = f"{base}_h{h}_d{delta}"
+    reproduce.CANDIDATES[name] = dict(reproduce.CANDIDATES[base], delta_bar=delta)
+    if h is not None:
+        reproduce.CANDIDATES[name]["cohesive_range"] = h
+    rec = reproduce.run_point(reproduce.rows()["coil"][0], name, None, None, 0)["record"]
+    return {"adhesion": "eq1" if h is None else "cohesive", "cohesive_range": h,
+            "delta_bar": delta, "pattern": rec["pattern"], "R0": rec["coil_radius"],
+            "wall_s": rec["wall_s"], "error": rec["error"]}  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("points", nargs="+", help="h:delta (h = eq1 for eq. 1)")
+    ap.add_argument("--out", type=Path, default=None, help="append JSON lines here")
+    args = ap.parse_args(argv)
+    for spec in args.points:
+        h, delta = spec.split(":")
+        row = coil_point(None if h == "eq1" else float(h), float(delta))
+        print(json.dumps(row), flush=True)
+        if args.out is not None:
+            with args.out.open("a") as fh:
+                fh.write(json.dumps(row) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
