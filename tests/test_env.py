@@ -171,6 +171,8 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(warmup_seed=-1), dict(warmup_seed=1.5), dict(cache_dir=123), dict(drag_law="x"),
      dict(families="line"), dict(families=("straight", 3)), dict(physics=[1, 2]),
      dict(sim_options={"no_such_option": 1}), dict(sim_options={"newton": {"tol": 1e-5}}),
+     dict(sim_options={"contact": {"adhesion": "glue"}}),
+     dict(sim_options={"contact": {"range": 0.1}}),
      dict(tolerance="wide"), dict(vbar_max=True),
      dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
      dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324),
@@ -197,6 +199,22 @@ def test_env_speed_settings_by_substrate() -> None:
     assert CNTDepositEnv(delta_bar=5.0, initial_radius=10.5).config.coarse_delta is None
     own = CNTDepositEnv(sim_options={"coarse_delta": None, "newton": {"residual_tol": 1e-8}})
     assert own.config.coarse_delta is None and own.config.newton.residual_tol == 1e-8
+
+
+def test_env_runs_the_cohesive_adhesion_given_as_a_dict(tmp_path) -> None:
+    """sim_options["contact"] takes ContactOptions fields as a dict (YAML-friendly): the
+    cohesive adhesion of docs/model.md §4, on the env's own mesh and step."""
+    options = {"dt_factor": 0.05, "contact": {"adhesion": "cohesive"}}
+    env = CNTDepositEnv(**{**SMALL, "delta_bar": 0.2, "cache_dir": str(tmp_path),
+                           "sim_options": options})  # fmt: skip
+    assert env.config.contact.adhesion == "cohesive" and env.config.contact.cohesive_range == 0.05
+    env.reset(seed=0)
+    laid = env.sim.deposited_length
+    for _ in range(3):
+        info = env.step(np.array([0.5, 0.0], dtype=np.float32))[-1]
+        assert "failure" not in info
+    assert env.sim.deposited_length > laid
+    env.close()
 
 
 def test_a_bare_family_name_is_one_family() -> None:

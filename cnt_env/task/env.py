@@ -212,7 +212,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `coarse_delta`     | 6.0          | graded mesh (DepositionConfig); ENV_MESH        |
     | `initial_radius`   | preset's     | start-up arc radius (L_vb)                      |
     | `drag_law`         | "linear"     | "linear" or "printed" (presets.MODEL)           |
-    | `sim_options`      | None         | other DepositionConfig fields (dict)            |
+    | `sim_options`      | None         | other DepositionConfig fields (dict); e.g.      |
+    |                    |              | {"contact": {"adhesion": "cohesive"}}           |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
     | `flow_gain`        | 1.0          | simulated / commanded flow speed (calibrates a  |
     |                    |              | surrogate's kinematics to the model's)          |

@@ -21,7 +21,7 @@ from cnt_env.presets import (
     graded_coarse,
     mesh_for,
 )
-from cnt_env.sim.deposition import DepositionConfig
+from cnt_env.sim.deposition import ContactOptions, DepositionConfig
 from cnt_env.sim.stepper import NewtonOptions
 from cnt_env.units import DimensionlessParams, paper_groups
 
@@ -190,6 +190,11 @@ def deposition_config(
             cfg["newton"] = NewtonOptions(**{**NEWTON, **cfg["newton"]})
         except TypeError as exc:
             raise ValueError(f"sim_options['newton']: {exc}") from exc
+    if isinstance(cfg.get("contact"), Mapping):  # ContactOptions fields, e.g. adhesion
+        try:
+            cfg["contact"] = ContactOptions(**cfg["contact"])
+        except TypeError as exc:
+            raise ValueError(f"sim_options['contact']: {exc}") from exc
     try:
         return DepositionConfig(params=params, drag_law=drag_law, **cfg)
     except TypeError as exc:  # an unknown field in sim_options
