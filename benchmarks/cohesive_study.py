@@ -9,6 +9,11 @@ reproduction table (``reproduce.py``, 1500 L_vb with 900 dropped) with the candi
     python benchmarks/cohesive_study.py 0.2:0.2 0.1:0.2 0.05:0.2 0.05:0.1 0.025:0.1 \
         0.05:0.05 --out benchmarks/results/cohesive_study.jsonl
 
+and at H = 100, where the cohesive contact lays no coil:
+
+    python benchmarks/cohesive_study.py 0.1:0.2 0.05:0.1 eq1:0.2 --Hbar 100 \
+        --out benchmarks/results/cohesive_study.jsonl
+
 (A range below delta^2 is refused by DepositionConfig: the mesh cannot resolve it.)
 """
 
@@ -25,27 +30,41 @@ sys.path.insert(0, str(ROOT))
 from benchmarks import reproduce  # noqa: E402
 
 
-def coil_point(h: float | None, delta: float) -> dict:
-    """R0 of the coil point with the cohesive range ``h`` (None: eq. 1) at ``delta``."""
+def coil_point(h: float | None, delta: float, hbar: float | None = None) -> dict:
+    """R0 of the coil point with the cohesive range ``h`` (None: eq. 1) at ``delta``: the
+    baseline, or the ``coil_groups`` point at ``hbar``."""
     base = "C_fine" if h is None else "C_cohesive"
     name = f"{base}_h{h}_d{delta}"
     reproduce.CANDIDATES[name] = dict(reproduce.CANDIDATES[base], delta_bar=delta)
     if h is not None:
         reproduce.CANDIDATES[name]["cohesive_range"] = h
-    rec = reproduce.run_point(reproduce.rows()["coil"][0], name, None, None, 0)["record"]
+    rows = reproduce.rows()
+    point = (
+        rows["coil"][0]
+        if hbar is None
+        else next(p for p in rows["coil_groups"] if p["groups"] == {"Hbar": hbar})
+    )
+    rec = reproduce.run_point(point, name, None, None, 0)["record"]
     return {"adhesion": "eq1" if h is None else "cohesive", "cohesive_range": h,
-            "delta_bar": delta, "pattern": rec["pattern"], "R0": rec["coil_radius"],
+            "delta_bar": delta, "Hbar": rec["Hbar"], "pattern": rec["pattern"],
+            "R0": rec["coil_radius"],
             "wall_s": rec["wall_s"], "error": rec["error"]}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("points", nargs="+", help="h:delta (h = eq1 for eq. 1)")
+    ap.add_argument(
+        "--Hbar",
+        type=float,
+        default=None,
+        help="the coil_groups point at this Hbar (100-400) instead of the baseline",
+    )
     ap.add_argument("--out", type=Path, default=None, help="append JSON lines here")
     args = ap.parse_args(argv)
     for spec in args.points:
         h, delta = spec.split(":")
-        row = coil_point(None if h == "eq1" else float(h), float(delta))
+        row = coil_point(None if h == "eq1" else float(h), float(delta), args.Hbar)
         print(json.dumps(row), flush=True)
         if args.out is not None:
             with args.out.open("a") as fh:
