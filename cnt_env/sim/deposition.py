@@ -6,7 +6,8 @@ and does, after each converged implicit step (docs/model.md §4):
 1. contact: a free contact node that reaches y <= 0 is deposited (its DOFs fixed by the
    substrate); a new contact edge flatter than ``beta0_min`` is deposited at once;
 2. vdW: the contact node c feels F_y = -(e_v delta / beta0) / sqrt(delta^2 - y_c^2)
-   (paper eq. 1), inside the Newton solve with its Jacobian;
+   (paper eq. 1), inside the Newton solve with its Jacobian (or, with
+   ``ContactOptions.adhesion="cohesive"``, every free node within range is pulled);
 3. injection: while the top node is below H - delta, a node is appended one delta beyond
    it along the top tangent;
 4. deletion: deposited nodes the solve no longer needs leave it; every deposited node is

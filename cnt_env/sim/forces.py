@@ -1,5 +1,5 @@
-"""External forces with their Jacobians: vdW contact force (paper eq. 1) and rarefied drag
-(paper eq. 2).
+"""External forces with their Jacobians: vdW contact force (paper eq. 1, or the cohesive
+adhesion of finite range) and rarefied drag (paper eq. 2).
 
 Both kernels *add* the force to ``force`` and *add* -dF/dq (the contribution to the
 residual Jacobian) to the band ``ab``.
