@@ -114,6 +114,8 @@ def test_cohesive_range_the_mesh_cannot_resolve_is_refused() -> None:
         small_config(contact=contact)  # delta_bar 1
     params = paper_groups("coil", Hbar=30.0, Ibar=200.0, delta_bar=0.1)
     DepositionConfig(params=params, initial_radius=4.0, contact=contact)  # 0.02 >= 0.01
+    at_limit = ContactOptions(adhesion="cohesive", cohesive_range=0.01)  # 0.1**2 rounds up
+    DepositionConfig(params=params, initial_radius=4.0, contact=at_limit)
 
 
 @pytest.mark.parametrize("mode", ["event", "project"])
