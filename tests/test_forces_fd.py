@@ -15,8 +15,8 @@ from cnt_env.sim.forces import (
     adhesion_energy,
     cohesive_energy,
     cohesive_pull,
-    voronoi_weight,
 )
+from cnt_env.sim.stepper import Rod, RodMaterial
 from tests.rodkit import random_rod
 
 NO_FIXED = np.zeros(0, dtype=np.uint8)  # every Jacobian entry assembled
@@ -194,24 +194,28 @@ def test_add_cohesive_pulls_free_nodes_in_range_with_their_lengths() -> None:
     n = 6
     rest = np.array([0.2, 0.2, 0.25, 0.3, 0.4])
     ys = [0.0, 0.01, 0.02, 0.035, 0.3, 0.01]  # node 5 (the top) in range again
+    nodes = np.zeros((n, 3))
+    nodes[:, 0] = np.concatenate([[0.0], np.cumsum(rest)])
+    nodes[:, 1] = ys
+    vor = Rod(nodes, RodMaterial(1.0, 1.0, 1.0, 1.0, 0.01), rest_lengths=rest).voronoi_lengths
+    # half of each rest edge beside the node; the ends (0, the top) hold half their one edge
+    np.testing.assert_allclose(vor[:n], [0.1, 0.2, 0.225, 0.275, 0.35, 0.2], rtol=1e-15)
     q = np.zeros(4 * n - 1)
     q[1::4] = ys
     vdw = np.array([1.0, 1.0, 1.0, 0.05, COH_EV, ADHESION_COHESIVE, COH_H])
     f = np.zeros(q.size)
     ab = np.zeros((LDAB, q.size))
-    add_adhesion(q, n, rest, vdw, f, ab, True)
+    add_adhesion(q, n, vor, vdw, f, ab, True)
     for i in range(n):
         k = 4 * i + 1
         qp, qm = q.copy(), q.copy()
         qp[k] += H_FD
         qm[k] -= H_FD
-        fd = -(adhesion_energy(qp, n, rest, vdw) - adhesion_energy(qm, n, rest, vdw)) / (2 * H_FD)
+        fd = -(adhesion_energy(qp, n, vor, vdw) - adhesion_energy(qm, n, vor, vdw)) / (2 * H_FD)
         assert f[k] == pytest.approx(fd, rel=1e-6, abs=1e-9), i
-        w = voronoi_weight(rest, n, i)
-        expect = 0.0 if (i < 1 or ys[i] >= COH_H) else 2 * COH_EV * w / COH_H**2
+        expect = 0.0 if (i < 1 or ys[i] >= COH_H) else 2 * COH_EV * vor[i] / COH_H**2
         assert ab[KL + KU, k] == pytest.approx(-expect, rel=1e-12)
     assert f[1] == 0.0 and f[4 * 4 + 1] == 0.0  # deposited node 0; node 4 above the range
-    assert voronoi_weight(rest, n, 5) == pytest.approx(0.2)  # the top: half its one edge
     np.testing.assert_array_equal(np.delete(f, np.arange(1, q.size, 4)), 0.0)  # y only
 
 

@@ -564,7 +564,7 @@ class DepositionSim:
         if not self.cohesive:
             return 0.0
         r = self.rod
-        return adhesion_energy(r.q, r.n_nodes, r.rest_lengths, r.vdw)
+        return adhesion_energy(r.q, r.n_nodes, r.voronoi_lengths, r.vdw)
 
     def _vdw_force(self, y: float) -> float:
         """F_y on the contact node at height y (forces.vdw_pull, as in the solve)."""

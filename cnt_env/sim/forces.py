@@ -242,22 +242,12 @@ def cohesive_energy(y: float, weight: float, h: float, e_v: float) -> float:
 
 
 @njit(cache=True)
-def voronoi_weight(rest_lengths: np.ndarray, n_nodes: int, i: int) -> float:
-    """The rod length node i stands for: half of each rest edge beside it."""
-    w = 0.0
-    if i >= 1:
-        w += 0.5 * rest_lengths[i - 1]
-    if i < n_nodes - 1:
-        w += 0.5 * rest_lengths[i]
-    return w
-
-
-@njit(cache=True)
-def add_cohesive(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, vdw: np.ndarray,
+def add_cohesive(q: np.ndarray, n_nodes: int, voronoi_lengths: np.ndarray, vdw: np.ndarray,
                  force: np.ndarray, ab: np.ndarray, with_jacobian: bool) -> None:  # fmt: skip
     """Add the cohesive pull (:func:`cohesive_pull`, range ``vdw[VDW_RANGE]``) on every
-    free node from the contact node c = ``vdw[VDW_NODE]`` to the top, and -dF_y/dy to
-    the residual Jacobian. Nodes above the range feel nothing, so the pull hands over
+    free node from the contact node c = ``vdw[VDW_NODE]`` to the top, each weighted by
+    its Voronoi length (Rod.voronoi_lengths: half of each rest edge beside it), and
+    -dF_y/dy to the residual Jacobian. Nodes above the range feel nothing, so the pull hands over
     from one node to the next continuously as the rod rolls onto the substrate."""
     first = int(vdw[VDW_NODE])
     if first < 0:
@@ -268,14 +258,14 @@ def add_cohesive(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, vdw: np.
         k = 4 * i + 1
         if q[k] >= h:
             continue
-        f, dfdy = cohesive_pull(q[k], voronoi_weight(rest_lengths, n_nodes, i), h, e_v)
+        f, dfdy = cohesive_pull(q[k], voronoi_lengths[i], h, e_v)
         force[k] += f
         if with_jacobian:
             ab[_DIAG, k] -= dfdy
 
 
 @njit(cache=True)
-def adhesion_energy(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray,
+def adhesion_energy(q: np.ndarray, n_nodes: int, voronoi_lengths: np.ndarray,
                     vdw: np.ndarray) -> float:  # fmt: skip
     """The cohesive model's energy summed over the nodes :func:`add_cohesive` pulls."""
     first = int(vdw[VDW_NODE])
@@ -285,18 +275,17 @@ def adhesion_energy(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray,
     for i in range(first, n_nodes):
         y = q[4 * i + 1]
         if y < vdw[VDW_RANGE]:
-            total += cohesive_energy(y, voronoi_weight(rest_lengths, n_nodes, i),
-                                     vdw[VDW_RANGE], vdw[VDW_ENERGY])  # fmt: skip
+            total += cohesive_energy(y, voronoi_lengths[i], vdw[VDW_RANGE], vdw[VDW_ENERGY])
     return total
 
 
 @njit(cache=True)
-def add_adhesion(q: np.ndarray, n_nodes: int, rest_lengths: np.ndarray, vdw: np.ndarray,
+def add_adhesion(q: np.ndarray, n_nodes: int, voronoi_lengths: np.ndarray, vdw: np.ndarray,
                  force: np.ndarray, ab: np.ndarray, with_jacobian: bool) -> None:  # fmt: skip
     """The vdW adhesion of the model ``vdw[VDW_MODEL]``: paper eq. 1 (:func:`add_vdw`)
     or the cohesive pull (:func:`add_cohesive`)."""
     if int(vdw[VDW_MODEL]) == ADHESION_COHESIVE:
-        add_cohesive(q, n_nodes, rest_lengths, vdw, force, ab, with_jacobian)
+        add_cohesive(q, n_nodes, voronoi_lengths, vdw, force, ab, with_jacobian)
         return
     node = int(vdw[VDW_NODE])
     if node < 0:

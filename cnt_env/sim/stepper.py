@@ -285,7 +285,7 @@ def assemble(
         for c in range(n_dof):
             for r in range(LDAB):
                 ab[r, c] += ab_soft[r, c]
-    add_adhesion(q, n_nodes, rest_lengths, vdw, force, ab, True)
+    add_adhesion(q, n_nodes, voronoi_lengths, vdw, force, ab, True)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, True)
     res = 0.0
     for k in range(n_dof):
@@ -350,7 +350,7 @@ def residual(
     else:
         add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
                          force, ab, False, fixed)  # fmt: skip
-    add_adhesion(q, n_nodes, rest_lengths, vdw, force, ab, False)
+    add_adhesion(q, n_nodes, voronoi_lengths, vdw, force, ab, False)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, False)
     res = 0.0
     for k in range(n_dof):
