@@ -14,6 +14,12 @@ and at H = 100, where the cohesive contact lays no coil:
     python benchmarks/cohesive_study.py 0.1:0.2 0.05:0.1 eq1:0.2 --Hbar 100 \
         --out benchmarks/results/cohesive_study.jsonl
 
+and with the paper's printed drag law (rows with "drag_law": "printed"; rows without
+the key ran before it existed, with the linear law):
+
+    python benchmarks/cohesive_study.py 0.05:0.2 0.05:0.1 --drag-law printed \
+        --out benchmarks/results/cohesive_study.jsonl
+
 (A range below delta^2 is refused by DepositionConfig: the mesh cannot resolve it.)
 """
 
@@ -30,12 +36,16 @@ sys.path.insert(0, str(ROOT))
 from benchmarks import reproduce  # noqa: E402
 
 
-def coil_point(h: float | None, delta: float, hbar: float | None = None) -> dict:
+def coil_point(
+    h: float | None, delta: float, hbar: float | None = None, drag_law: str = "linear"
+) -> dict:
     """R0 of the coil point with the cohesive range ``h`` (None: eq. 1) at ``delta``: the
-    baseline, or the ``coil_groups`` point at ``hbar``."""
+    baseline, or the ``coil_groups`` point at ``hbar``; ``drag_law`` as in the model."""
     base = "C_fine" if h is None else "C_cohesive"
-    name = f"{base}_h{h}_d{delta}"
-    reproduce.CANDIDATES[name] = dict(reproduce.CANDIDATES[base], delta_bar=delta)
+    name = f"{base}_h{h}_d{delta}_{drag_law}"
+    reproduce.CANDIDATES[name] = dict(
+        reproduce.CANDIDATES[base], delta_bar=delta, drag_law=drag_law
+    )
     if h is not None:
         reproduce.CANDIDATES[name]["cohesive_range"] = h
     rows = reproduce.rows()
@@ -46,8 +56,8 @@ def coil_point(h: float | None, delta: float, hbar: float | None = None) -> dict
     )
     rec = reproduce.run_point(point, name, None, None, 0)["record"]
     return {"adhesion": "eq1" if h is None else "cohesive", "cohesive_range": h,
-            "delta_bar": delta, "Hbar": rec["Hbar"], "pattern": rec["pattern"],
-            "R0": rec["coil_radius"],
+            "drag_law": drag_law, "delta_bar": delta, "Hbar": rec["Hbar"],
+            "pattern": rec["pattern"], "R0": rec["coil_radius"],
             "wall_s": rec["wall_s"], "error": rec["error"]}  # fmt: skip
 
 
@@ -60,11 +70,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="the coil_groups point at this Hbar (100-400) instead of the baseline",
     )
+    ap.add_argument("--drag-law", choices=("linear", "printed"), default="linear",
+                    help="the drag law (linear: the model's, C_fine / C_cohesive)")  # fmt: skip
     ap.add_argument("--out", type=Path, default=None, help="append JSON lines here")
     args = ap.parse_args(argv)
     for spec in args.points:
         h, delta = spec.split(":")
-        row = coil_point(None if h == "eq1" else float(h), float(delta), args.Hbar)
+        row = coil_point(None if h == "eq1" else float(h), float(delta), args.Hbar, args.drag_law)
         print(json.dumps(row), flush=True)
         if args.out is not None:
             with args.out.open("a") as fh:

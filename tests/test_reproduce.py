@@ -157,3 +157,19 @@ def test_capped_points_name_the_cap_and_uncapped_records_leave_the_tables() -> N
     assert not reproduce._before_cap({**old, "key": old["key"] + "|dtcap=155"})
     assert not reproduce._before_cap({**old, "Hbar": cap})
     assert not reproduce._before_cap({**old, "kappa_c_bar": None})  # a coil: no cap
+
+
+def test_every_candidate_makes_a_valid_config_at_every_point() -> None:
+    """Each named candidate of the study (a dict of DepositionConfig fields) builds and
+    validates at every point of the table, and it fixes what it names: its drag law and
+    contact on both substrates, its sliding rule on the stepped one."""
+    points = [p for row in reproduce.rows(False).values() for p in row]
+    for name, changes in reproduce.CANDIDATES.items():
+        for p in points:
+            cfg = reproduce.point_config(p, name, None)
+            stepped = p["preset"] != reproduce.COIL
+            for field in ("drag_law", "sliding", "adhesion"):
+                if field not in changes or (field == "sliding" and not stepped):
+                    continue
+                got = cfg.contact.adhesion if field == "adhesion" else getattr(cfg, field)
+                assert got == changes[field], (name, p["row"], field)
