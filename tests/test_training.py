@@ -20,6 +20,8 @@ SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
              control_interval=15.0, reset_advance=2.0, pattern_every=0,
              sim_options={"dt_factor": 0.05})  # fmt: skip
 RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
+#: goes on training the shipped agent (cnt-train --trained-agent) on the calibrated surrogate
+SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
@@ -447,7 +449,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
     ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9), and
     ppo_residual_calibrated_curriculum.yml starts at 3 in 10 and ends on every family
-    once (training.callbacks.Curriculum)."""
+    once (training.callbacks.Curriculum); ppo_residual_shipped_detour_finetune.yml goes on
+    training the shipped agent on the calibrated surrogate, detour 3 in 10."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -474,13 +477,15 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(twin_of, surrogate), path.name
-            if twin_of == "ppo_residual_calibrated.yml":
+            if twin_of in ("ppo_residual_calibrated.yml", SHIPPED_FINETUNE):
                 assert (base.flow_gain, base.n_substeps) == (1.44, 99)
             else:
                 assert base.flow_gain == 1.0, path.name
+            share = (base.families.count("detour"), len(base.families))
             if suffix is not None:  # the detour family repeated in the drawn families
-                share = (base.families.count("detour"), len(base.families))
                 assert share == detour_share[suffix], path.name
+            elif path.name == SHIPPED_FINETUNE:
+                assert share == (3, 10)
             stages = curriculum_settings(config)  # a curriculum is well formed
             assert bool(stages) == (suffix == "_curriculum.yml"), path.name
             if stages:  # ... and ends on every family once, as the untwinned config
@@ -610,3 +615,17 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
     write_manifest(first.parent, [f.name for f in first.parent.glob("ppo*") if f.is_file()])
     with pytest.raises(ValueError, match="resolved config"):
         train("ppo", config, tmp_path / "bad3", seed=0, progress_bar=False, trained_agent=first)
+
+
+def test_the_finetune_config_acts_on_the_shipped_agents_own_base() -> None:
+    """ppo_residual_shipped_detour_finetune.yml goes on training the shipped agent:
+    cnt-train's check (same algorithm, base with the same pinned options, frame stack,
+    normalisation) accepts the pair, and a config on today's follower is refused."""
+    from training.common import CONFIG_DIR, load_config
+    from training.train import check_trained_agent
+
+    shipped = PRETRAINED_DIR / "ppo_residual.zip"
+    record = check_trained_agent(shipped, "ppo", load_config(CONFIG_DIR / SHIPPED_FINETUNE))
+    assert record["path"] == str(shipped) and len(record["sha256"]) == 64
+    with pytest.raises(ValueError, match="residual settings"):
+        check_trained_agent(shipped, "ppo", load_config(CONFIG_DIR / "ppo_residual_calibrated.yml"))
