@@ -449,8 +449,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_detour.yml is ppo_residual.yml's _detour twin,
     ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9), and
     ppo_residual_calibrated_curriculum.yml starts at 3 in 10 and ends on every family
-    once (training.callbacks.Curriculum); ppo_residual_shipped_detour_finetune.yml goes on
-    training the shipped agent on the calibrated surrogate, detour 3 in 10."""
+    once (training.callbacks.Curriculum), ppo_residual_calibrated_open_then_detour.yml the
+    other way round; ppo_residual_shipped_detour_finetune.yml goes on training the shipped
+    agent on the calibrated surrogate, detour 3 in 10."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -465,10 +466,15 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
                 "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33),
                 "ppo_residual_linear033_finetune.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
-    # (detours, families) of each weighted twin; a _curriculum twin starts at 3 in 10
-    detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10)}
+    # (detours, families) of each weighted twin; a curriculum twin's first draw, and its
+    # last stage's (every family once: (1, len(FAMILIES)))
+    once = (1, len(FAMILIES))
+    detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10),
+                    "_open_then_detour.yml": once}  # fmt: skip
+    last_share = {"_curriculum.yml": once, "_open_then_detour.yml": (3, 10)}
     for path in configs:
-        suffix = next((k for k in detour_share if path.name.endswith(k)), None)
+        # the longest suffix that matches (_open_then_detour.yml also ends in _detour.yml)
+        suffix = max((k for k in detour_share if path.name.endswith(k)), key=len, default=None)
         twin_of = path.name.removesuffix(suffix or ".yml") + ".yml"  # a weighted twin: its physics
         config = load_config(path)
         env_kwargs, steps = env_settings(config)
@@ -487,9 +493,11 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             elif path.name == SHIPPED_FINETUNE:
                 assert share == (3, 10)
             stages = curriculum_settings(config)  # a curriculum is well formed
-            assert bool(stages) == (suffix == "_curriculum.yml"), path.name
-            if stages:  # ... and ends on every family once, as the untwinned config
-                assert sorted(stages[-1][1]["families"]) == sorted(FAMILIES), path.name
+            assert bool(stages) == (suffix in last_share), path.name
+            if stages:  # ... and ends on its last draw, every family drawn
+                last = stages[-1][1]["families"]
+                assert set(last) == set(FAMILIES), path.name
+                assert (last.count("detour"), len(last)) == last_share[suffix], path.name
         finally:
             env.close()
 
