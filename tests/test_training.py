@@ -450,8 +450,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_calibrated_detour2.yml weights detour more mildly (2 in 9), and
     ppo_residual_calibrated_curriculum.yml starts at 3 in 10 and ends on every family
     once (training.callbacks.Curriculum), ppo_residual_calibrated_open_then_detour.yml the
-    other way round; ppo_residual_shipped_detour_finetune.yml goes on training the shipped
-    agent on the calibrated surrogate, detour 3 in 10."""
+    other way round; ppo_residual_shipped_detour_finetune.yml goes on training a trained
+    agent on the calibrated surrogate, detour 3 in 10, and is the last stage of the
+    shipped residual agent, whose policies/pretrained/ppo_residual.yml is that stage's."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -459,6 +460,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     root = Path(__file__).resolve().parents[1]
     configs = sorted((root / "training" / "configs").glob("*.yml"))
     configs += sorted((root / "policies" / "pretrained").glob("*.yml"))
+    shipped_residual = root / "policies" / "pretrained" / "ppo_residual.yml"
     assert any(p.name == "eval.yml" for p in configs)
     surrogate = (SURROGATE["drag_law"], SURROGATE["delta_bar"])
     model = (MODEL["drag_law"], MESH["serpentine"]["delta_bar"])
@@ -476,6 +478,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
         # the longest suffix that matches (_open_then_detour.yml also ends in _detour.yml)
         suffix = max((k for k in detour_share if path.name.endswith(k)), key=len, default=None)
         twin_of = path.name.removesuffix(suffix or ".yml") + ".yml"  # a weighted twin: its physics
+        shipped_last_stage = path.name == SHIPPED_FINETUNE or path == shipped_residual
         config = load_config(path)
         env_kwargs, steps = env_settings(config)
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
@@ -483,15 +486,15 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(twin_of, surrogate), path.name
-            if twin_of in ("ppo_residual_calibrated.yml", SHIPPED_FINETUNE):
+            if twin_of == "ppo_residual_calibrated.yml" or shipped_last_stage:
                 assert (base.flow_gain, base.n_substeps) == (1.44, 99)
             else:
                 assert base.flow_gain == 1.0, path.name
             share = (base.families.count("detour"), len(base.families))
             if suffix is not None:  # the detour family repeated in the drawn families
                 assert share == detour_share[suffix], path.name
-            elif path.name == SHIPPED_FINETUNE:
-                assert share == (3, 10)
+            elif shipped_last_stage:
+                assert share == (3, 10), path.name
             stages = curriculum_settings(config)  # a curriculum is well formed
             assert bool(stages) == (suffix in last_share), path.name
             if stages:  # ... and ends on its last draw, every family drawn
