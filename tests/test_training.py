@@ -585,7 +585,7 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
     from stable_baselines3 import PPO
 
     from policies.sb3 import file_sha256, load_vecnormalize, write_manifest
-    from training.train import train
+    from training.train import check_trained_agent, train
 
     config = {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
         {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3}}]}  # fmt: skip
@@ -617,6 +617,16 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
         with pytest.raises(ValueError, match=match):
             train("ppo", cfg, tmp_path / "bad", seed=0, progress_bar=False, trained_agent=first)
         assert not (tmp_path / "bad" / "monitor").exists(), "refused after building envs"
+    # other options of the same base follower: refused, unless asked for, and recorded
+    other_options = {**config, "env_wrapper": [{"training.common.ResidualAction": {
+        "base": "scripted", "scale": 0.3, "base_kwargs": {"lookahead": 12.0}}}]}  # fmt: skip
+    with pytest.raises(ValueError, match="--new-base-options"):
+        check_trained_agent(first, "ppo", other_options)
+    with pytest.raises(ValueError, match="residual settings"):  # another scale: never
+        check_trained_agent(first, "ppo", other_base, new_base_options=True)
+    record = check_trained_agent(first, "ppo", other_options, new_base_options=True)
+    assert record["base_kwargs_was"]["lookahead"] == 20.0  # the follower's default
+    assert "base_kwargs_was" not in check_trained_agent(first, "ppo", config, True)
     with pytest.raises(ValueError, match="is a ppo agent"):
         train("sac", config, tmp_path / "bad1", seed=0, progress_bar=False, trained_agent=first)
     with pytest.raises(ValueError, match="policy"):  # SB3's own check of policy_kwargs

@@ -2,7 +2,7 @@
 
     cnt-train --algo ppo [--config training/configs/ppo.yml] [--seed 0]
               [--n-timesteps N] [--max-wall-seconds S] [--out runs/] [--n-envs 2]
-              [--trained-agent runs/ppo_s0/ppo.zip]
+              [--trained-agent runs/ppo_s0/ppo.zip [--new-base-options]]
 
 One run directory ``<out>/<algo>_s<seed>/`` (``_2``, ``_3``, ... when it exists: a run
 never overwrites an earlier one) holds:
@@ -145,6 +145,7 @@ def train(
     progress_bar: bool = True,
     verbose: int = 0,
     trained_agent: Path | None = None,
+    new_base_options: bool = False,
 ) -> Path:
     """Train ``algo`` with ``config`` (an rl-zoo entry); returns the model path.
 
@@ -152,7 +153,9 @@ def train(
     VecNormalize statistics) to go on training instead of a new one (rl-zoo's
     ``--trained-agent``), e.g. on other physics (:func:`check_trained_agent`). The
     config's hyperparameters replace the saved ones, its schedules start again, and the
-    step count starts at 0; the run's ``config.yml`` records the agent's earlier run."""
+    step count starts at 0; the run's ``config.yml`` records the agent's earlier run.
+    ``new_base_options``: the agent goes on over the config's options of its base follower
+    even where they differ from those it was trained over (recorded as ``base_kwargs_was``)."""
     limit_threads()
     import stable_baselines3
     from stable_baselines3 import PPO, SAC
@@ -171,7 +174,8 @@ def train(
     env_kwargs, max_steps = env_settings(config)
     check_callbacks(config)  # the callbacks, checked before any env is built
     stages = curriculum_settings(config)
-    earlier = None if trained_agent is None else check_trained_agent(trained_agent, algo, config)
+    earlier = (None if trained_agent is None
+               else check_trained_agent(trained_agent, algo, config, new_base_options))  # fmt: skip
     n_envs = int(config.get("n_envs", 2))
     vec_env = vec_env or config.get("vec_env", "subproc")
     run = Path(out)
@@ -312,12 +316,21 @@ def train(
     return model_path
 
 
-def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[str, Any]:
+def _but_options(residual: dict) -> dict:
+    """Residual settings without the base's options (``base_kwargs``)."""
+    return {k: v for k, v in residual.items() if k != "base_kwargs"}
+
+
+def check_trained_agent(
+    path: Path, algo: str, config: dict[str, Any], new_base_options: bool = False
+) -> dict[str, Any]:
     """Refuse to go on training the model at ``path`` with ``config`` unless the agent it
     makes acts on the same thing: the same algorithm, a residual agent's same base with the
-    same pinned options, the same frame stack, and VecNormalize statistics if (and only
-    if) the config normalises. The spaces and ``policy_kwargs`` are checked by SB3 when it
-    loads. Returns the record of the agent's earlier run (path, sha256, its ``run``)."""
+    same pinned options (``new_base_options``: other options of the same base are allowed,
+    and recorded as ``base_kwargs_was``), the same frame stack, and VecNormalize statistics
+    if (and only if) the config normalises. The spaces and ``policy_kwargs`` are checked by
+    SB3 when it loads. Returns the record of the agent's earlier run (path, sha256, its
+    ``run``)."""
     path = Path(path)
     resolved = model_config(path)  # yaml.safe_load
     run = resolved.get("run")
@@ -334,10 +347,15 @@ def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[s
     mode = score_mode(env_kwargs)
     was = to_jsonable(residual_settings(pin_base(saved, mode)))
     now = to_jsonable(residual_settings(pin_base(config, mode)))
+    record: dict[str, Any] = {}
     if was != now:
-        raise ValueError(f"{path.name} was trained with the residual settings {was}; "
-                         f"this config gives {now}: set the config's ResidualAction to "
-                         "the agent's")  # fmt: skip
+        same_base = None not in (was, now) and _but_options(was) == _but_options(now)
+        if not (new_base_options and same_base):
+            raise ValueError(f"{path.name} was trained with the residual settings {was}; "
+                             f"this config gives {now}: set the config's ResidualAction to "
+                             "the agent's (or pass --new-base-options if only the base's "
+                             "options differ)")  # fmt: skip
+        record["base_kwargs_was"] = was["base_kwargs"]
     if frame_stack(saved) != frame_stack(config):
         raise ValueError(f"{path.name} was trained on a frame stack of {frame_stack(saved)}, "
                          f"the config asks for {frame_stack(config)}")  # fmt: skip
@@ -346,7 +364,7 @@ def check_trained_agent(path: Path, algo: str, config: dict[str, Any]) -> dict[s
         raise ValueError(f"{path.name} was trained {'with' if has_stats else 'without'} "
                          "VecNormalize statistics (normalize: true) and the config "
                          f"{'does not normalise' if has_stats else 'normalises'}")  # fmt: skip
-    return {"path": str(path), "sha256": file_sha256(path), "run": run}
+    return {"path": str(path), "sha256": file_sha256(path), "run": run, **record}
 
 
 def _checkpoint_callback(base):
@@ -396,6 +414,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trained-agent", type=Path, default=None,
                    help="a model saved by cnt-train (.zip) to go on training (rl-zoo's "
                         "--trained-agent; same base, spaces and policy_kwargs)")  # fmt: skip
+    p.add_argument("--new-base-options", action="store_true",
+                   help="with --trained-agent: go on over the config's options of the "
+                        "agent's base follower where they differ from its own")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("runs"), help="parent of the run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity")
@@ -417,7 +438,8 @@ def main(argv: list[str] | None = None) -> int:
     run = fresh_dir(args.out / f"{args.algo}_s{args.seed}")  # never overwrites a run
     train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
           max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,
-          verbose=args.verbose, trained_agent=args.trained_agent)  # fmt: skip
+          verbose=args.verbose, trained_agent=args.trained_agent,
+          new_base_options=args.new_base_options)  # fmt: skip
     return 0
 
 
