@@ -452,7 +452,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     once (training.callbacks.Curriculum), ppo_residual_calibrated_open_then_detour.yml the
     other way round; ppo_residual_shipped_detour_finetune.yml goes on training a trained
     agent on the calibrated surrogate, detour 3 in 10, and is the last stage of the
-    shipped residual agent, whose policies/pretrained/ppo_residual.yml is that stage's."""
+    shipped residual agent, whose policies/pretrained/ppo_residual.yml is that stage's;
+    sac_residual.yml (and its _sde twin) trains residual SAC on the calibrated surrogate,
+    detour 2 in 9."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -474,6 +476,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10),
                     "_open_then_detour.yml": once}  # fmt: skip
     last_share = {"_curriculum.yml": once, "_open_then_detour.yml": (3, 10)}
+    calibrated_share = {"sac_residual.yml": (2, 9), "sac_residual_sde.yml": (2, 9)}  # other names
     for path in configs:
         # the longest suffix that matches (_open_then_detour.yml also ends in _detour.yml)
         suffix = max((k for k in detour_share if path.name.endswith(k)), key=len, default=None)
@@ -486,7 +489,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             base = env.unwrapped
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(twin_of, surrogate), path.name
-            if twin_of == "ppo_residual_calibrated.yml" or shipped_last_stage:
+            calibrated = twin_of == "ppo_residual_calibrated.yml" or path.name in calibrated_share
+            if calibrated or shipped_last_stage:
                 assert (base.flow_gain, base.n_substeps) == (1.44, 99)
             else:
                 assert base.flow_gain == 1.0, path.name
@@ -495,6 +499,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
                 assert share == detour_share[suffix], path.name
             elif shipped_last_stage:
                 assert share == (3, 10), path.name
+            elif path.name in calibrated_share:
+                assert share == calibrated_share[path.name], path.name
             stages = curriculum_settings(config)  # a curriculum is well formed
             assert bool(stages) == (suffix in last_share), path.name
             if stages:  # ... and ends on its last draw, every family drawn
@@ -627,6 +633,11 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
     record = check_trained_agent(first, "ppo", other_options, new_base_options=True)
     assert record["base_kwargs_was"]["lookahead"] == 20.0  # the follower's default
     assert "base_kwargs_was" not in check_trained_agent(first, "ppo", config, True)
+    from training.train import main as train_main
+
+    with pytest.raises(SystemExit) as stop:  # the flag alone would be silently ignored
+        train_main(["--algo", "ppo", "--new-base-options", "--out", str(tmp_path / "cli")])
+    assert stop.value.code == 2 and not (tmp_path / "cli").exists()
     with pytest.raises(ValueError, match="is a ppo agent"):
         train("sac", config, tmp_path / "bad1", seed=0, progress_bar=False, trained_agent=first)
     with pytest.raises(ValueError, match="policy"):  # SB3's own check of policy_kwargs

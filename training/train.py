@@ -424,7 +424,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.new_base_options and args.trained_agent is None:
+        parser.error(
+            "--new-base-options changes the base of a trained agent: give the "
+            "agent with --trained-agent (a new run takes the config's base as is)"
+        )
     config = load_config(args.config or CONFIG_DIR / f"{args.algo}.yml")
     if args.n_timesteps is not None:
         config["n_timesteps"] = args.n_timesteps
