@@ -815,7 +815,9 @@ def test_route_targets_in_every_form(rkw: dict, target) -> None:
 
 @pytest.mark.parametrize("bad", [[[0, 0], [1e-300, 0]], [[0, 0], [0.5, 0]], "nowhere",
                                  {"waypoints": [[0, 0], [9, 0]], "width": 0.1},
-                                 {"points": [[0, 0], [9, 0]]}])  # fmt: skip
+                                 {"points": [[0, 0], [9, 0]]},
+                                 {"waypoints": [[0, 0], [80, 0]],
+                                  "keepouts": [{"rect": [30, -5, 40, 5]}]}])  # fmt: skip
 def test_degenerate_route_raises_and_the_env_stays_usable(rkw: dict, bad) -> None:
     env = CNTDepositEnv(**rkw)
     env.reset(seed=0, options={"target": "u_turn"})

@@ -271,3 +271,50 @@ def test_route_keepouts_stay_off_the_route() -> None:
         line = T.resample(r.waypoints, 0.5)[0]
         m = RouteScore(r.waypoints, r.width, r.pads, r.keepouts).update(line, len(line))
         assert m["shorts"] == 0 and m["completed"] and m["pads_crossed"] == len(r.pads), name
+
+
+@pytest.mark.parametrize(
+    ("spec", "what"),
+    [
+        ({"waypoints": [[0, 0], [80, 0]], "keepouts": [{"rect": [-5, -5, 5, 5]}]}, "waypoint 0"),
+        ({"waypoints": [[0, 0], [80, 0]], "keepouts": [{"rect": [30, -5, 40, 5]}]}, "leg 0"),
+        ({"waypoints": [[0, 0], [40, 0], [40, 60]], "keepouts": [[[20, 30], [60, 30], [60, 40]]]},
+         "leg 1"),
+        ({"waypoints": [[0, 0], [80, 0]], "pads": [[[40, 19], [40, 30]]]}, "pad 0"),
+    ],
+)  # fmt: skip
+def test_a_route_whose_parts_contradict_is_refused_with_its_reason(spec, what) -> None:
+    """A waypoint in a keep-out, a leg across one, a pad beyond the corridor's reach."""
+    from cnt_env.task import routes
+
+    with pytest.raises(ValueError, match=what):
+        routes.from_dict(spec)
+
+
+def test_a_route_beside_its_keepouts_and_pads_at_the_corridor_edge_is_accepted() -> None:
+    """The limits of the check: touching a keep-out is not crossing it; a pad whose end
+    is exactly w from the route is in reach. Every family draw passes (none is refused)."""
+    from cnt_env.task import routes
+
+    routes.from_dict({"waypoints": [[0, 0], [80, 0]], "keepouts": [{"rect": [30, 0, 40, 5]}],
+                      "pads": [[[60, 18.5], [60, 30]]]})  # fmt: skip
+    for fam in routes.FAMILIES:
+        for d in (0.0, 0.5, 1.0):
+            rng = np.random.default_rng(7)
+            for _ in range(100):
+                routes.draw(fam, rng, d)
+
+
+def test_segment_distance_and_crossing_against_closed_forms() -> None:
+    from cnt_env.task.geometry import segment_distance, segments_cross
+
+    a = np.array
+    assert segments_cross(a([0, 0]), a([2, 2]), a([0, 2]), a([2, 0]))
+    assert not segments_cross(a([0, 0]), a([1, 0]), a([1, 0]), a([1, 5]))  # touching
+    assert segment_distance(a([0, 0]), a([2, 2]), a([0, 2]), a([2, 0])) == 0.0
+    # parallel, offset by 3
+    assert segment_distance(a([0, 0]), a([4, 0]), a([1, 3]), a([2, 3])) == pytest.approx(3.0)
+    # end to end along a line: the gap between them
+    assert segment_distance(a([0, 0]), a([1, 0]), a([4, 0]), a([6, 0])) == pytest.approx(3.0)
+    # a degenerate segment (a point) to a segment: the point's distance
+    assert segment_distance(a([3, 4]), a([3, 4]), a([0, 0]), a([0, -5])) == pytest.approx(5.0)

@@ -10,7 +10,10 @@ follower (its plan around keep-outs).
 * :func:`nearest_on_polygons`: the nearest boundary point over several polygons;
 * :func:`inside_polygon` / :func:`count_in_polygons` (polygons packed by :func:`pack`):
   the even-odd rule (a point is inside when a ray along +x crosses the boundary an odd
-  number of times), in one compiled kernel.
+  number of times), in one compiled kernel;
+* :func:`segments_cross` / :func:`segment_distance`: whether two segments properly cross,
+  and the distance between them (0 when they meet); used to check a route's parts
+  against one another (``routes.Route``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ __all__ = [
     "nearest_on_boundary",
     "nearest_on_polygons",
     "pack",
+    "segment_distance",
+    "segments_cross",
 ]
 
 #: Offset returned by :func:`nearest_on_polygons` when there is no polygon (the
@@ -102,3 +107,34 @@ def count_in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray)
     out = np.empty(len(points), dtype=np.bool_)
     _inside_any(np.ascontiguousarray(points, dtype=np.float64), verts, starts, out)
     return int(np.count_nonzero(out))
+
+
+def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """Twice the signed area of the triangle (a, b, c): > 0 when c is left of a -> b."""
+    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+
+def segments_cross(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> bool:
+    """Whether segments p0-p1 and q0-q1 cross at a point interior to both (each
+    segment's ends strictly on opposite sides of the other's line; touching is not
+    crossing)."""
+    d1, d2 = _orient(q0, q1, p0), _orient(q0, q1, p1)
+    d3, d4 = _orient(p0, p1, q0), _orient(p0, p1, q1)
+    return d1 * d2 < 0 and d3 * d4 < 0
+
+
+def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """The distance from point p to segment a-b (a == b allowed)."""
+    ab = b - a
+    den = float(ab @ ab)
+    t = 0.0 if den == 0.0 else min(max(float((p - a) @ ab) / den, 0.0), 1.0)
+    return float(np.hypot(*(a + t * ab - p)))
+
+
+def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
+    """The distance between segments p0-p1 and q0-q1: 0 when they cross, else the least
+    distance from an end of one to the other."""
+    if segments_cross(p0, p1, q0, q1):
+        return 0.0
+    pairs = ((p0, q0, q1), (p1, q0, q1), (q0, p0, p1), (q1, p0, p1))
+    return min(_point_segment_distance(*pair) for pair in pairs)

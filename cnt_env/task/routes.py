@@ -1,4 +1,4 @@
-"""Circuit routes for ``CNTDeposit-v1`` task mode ``score="corridor"`` (docs/task.md).
+"""Circuit routes for ``CNTDeposit-v0`` task mode ``score="corridor"`` (docs/task.md).
 
 A :class:`Route` is how a CNT interconnect is specified and what the flow can draw: a
 polyline of waypoints in the substrate plane (x, z) in L_vb, starting at the origin (the
@@ -43,10 +43,16 @@ family          shape
   "keepouts": [[[x, z], ...] | {"rect": [x0, z0, x1, z1]}, ...], "name": str}``; only
   ``waypoints`` is required. Everything is translated with the waypoints so that the route
   starts at the origin.
+
+A route whose parts contradict one another is refused (``ValueError``): a waypoint inside
+a keep-out or a leg crossing one (the route itself would be a short, and the contact
+point starts on the route), or a pad that no point of the corridor reaches (crossing it
+means leaving the corridor).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -56,6 +62,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cnt_env.task import targets as targets_mod
+from cnt_env.task.geometry import inside_polygon, segment_distance, segments_cross
 from cnt_env.task.targets import cumulative_length
 
 __all__ = [
@@ -151,6 +158,7 @@ class Route:
                 raise ValueError("keep-out polygons must be finite")
             poly.setflags(write=False)
             keepouts.append(poly)
+        _check_consistent(pts, w, pads, keepouts)
         for arr in (pts, pads):
             arr.setflags(write=False)
         object.__setattr__(self, "waypoints", pts)
@@ -183,6 +191,29 @@ class Route:
             "pads": self.pads.tolist(),
             "keepouts": [k.tolist() for k in self.keepouts],
         }
+
+
+def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
+                      keepouts: list[FloatArray]) -> None:  # fmt: skip
+    """Refuse a route whose parts contradict one another (module doc)."""
+    legs = list(itertools.pairwise(pts))
+    fix = "route the waypoints around the keep-out"
+    for k, poly in enumerate(keepouts):
+        inside = np.flatnonzero(inside_polygon(pts, poly))
+        if inside.size:
+            i = int(inside[0])
+            raise ValueError(f"waypoint {i} {pts[i].tolist()} lies inside keep-out {k}: {fix}")
+        edges = list(itertools.pairwise(np.vstack([poly, poly[:1]])))
+        for i, (a, b) in enumerate(legs):
+            if any(segments_cross(a, b, c, d) for c, d in edges):
+                raise ValueError(f"leg {i} of the route ({a.tolist()} -> {b.tolist()}) "
+                                 f"crosses keep-out {k}: {fix}")  # fmt: skip
+    for j, (c, d) in enumerate(pads):
+        gap = min(segment_distance(a, b, c, d) for a, b in legs)
+        if gap > width:
+            raise ValueError(f"pad {j} {[c.tolist(), d.tolist()]} is {gap:.3g} L_vb from the "
+                             f"route, outside its corridor (half-width {width:.3g}): move the "
+                             "pad onto the corridor or widen it")  # fmt: skip
 
 
 def rectangle(x0: float, z0: float, x1: float, z1: float) -> FloatArray:
