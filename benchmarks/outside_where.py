@@ -1,0 +1,117 @@
+"""Where the trace leaves the corridor: the episode's first swing against the rest (issue 10).
+
+For each evaluated route episode of ``cnt-evaluate`` result directories (``episodes.json``
+and ``traces.npz``), the length of trace laid outside the route's corridor (a trace node
+farther than the half-width w from the route, weighted by its share of the trace's arc
+length, as the score's precision counts nodes) within the first ``--first`` L_vb of trace
+and after it. The first swing is laid from the env's warm state (the rod after H̄ of
+trace at the warm-start flow, then a random advance), before the rod can follow a new
+flow (its lag: docs/task.md): a loss that the steady steering does not show.
+
+    python benchmarks/outside_where.py training/results --out benchmarks/results/outside_where.json
+
+prints, per policy, the mean outside length in the first ``--first`` L_vb and after, the
+precision without the first part's loss, and the per-episode first-part table; with
+``--out`` it writes them as JSON (one entry per directory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def outside_lengths(trace: np.ndarray, route: np.ndarray, width: float,
+                    first: float) -> tuple[float, float, float]:  # fmt: skip
+    """``(outside within the first L_vb, outside after, laid length)`` of a trace (n, 2)
+    against the corridor of half-width ``width`` around ``route`` (m, 2), in the trace's
+    frame."""
+    from cnt_env.task.scoring import distances
+
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(trace, axis=0).T))])
+    weight = np.gradient(s) if len(s) > 1 else np.zeros(1)  # each node's share of the arc
+    out = distances(trace, route) > width
+    early = s < first
+    return (float(weight[out & early].sum()), float(weight[out & ~early].sum()), float(s[-1]))
+
+
+def analyse(results: Path, first: float, skip: set[str]) -> dict[str, Any]:
+    from cnt_env.task import routes
+
+    rows = json.loads((results / "episodes.json").read_text())
+    traces = np.load(results / "traces.npz")
+    per_policy: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
+    episodes = []
+    for i, r in enumerate(rows):
+        if r["target"] in skip or f"trace_{i}" not in traces:
+            continue
+        width = routes.held_out(r["target"]).width
+        trace, target = (traces[f"{k}_{i}"].astype(np.float64) for k in ("trace", "target"))
+        early, late, laid = outside_lengths(trace, target, width, first)
+        per_policy[r["policy"]].append((early, late, laid))
+        episodes.append({"policy": r["policy"], "target": r["target"], "seed": r["seed"],
+                         "score": r["score"], "outside_first": round(early, 2),
+                         "outside_after": round(late, 2), "laid": round(laid, 1)})  # fmt: skip
+    summary = {}
+    for p, v in per_policy.items():
+        a = np.array(v)
+        summary[p] = {
+            "episodes": len(a),
+            "outside_first": float(a[:, 0].mean()),
+            "outside_after": float(a[:, 1].mean()),
+            "laid": float(a[:, 2].mean()),
+            "precision": float(np.mean(1.0 - (a[:, 0] + a[:, 1]) / a[:, 2])),
+            "precision_without_first": float(np.mean(1.0 - a[:, 1] / a[:, 2])),
+        }
+    return {"results": str(results), "first": first, "skipped": sorted(skip),
+            "summary": summary, "episodes": episodes}  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("results", type=Path, nargs="+", help="cnt-evaluate result directories")
+    ap.add_argument("--first", type=float, default=60.0, help="L_vb of trace from the start")
+    ap.add_argument("--skip", default="detour_block",
+                    help="comma separated routes left out (default: the keep-out route, "
+                         "whose loss is its detour)")  # fmt: skip
+    ap.add_argument("--out", type=Path, help="write the figures here (JSON)")
+    args = ap.parse_args(argv)
+    skip = {t for t in args.skip.split(",") if t}
+    reports = []
+    for d in args.results:
+        rep = analyse(d, args.first, skip)
+        reports.append(rep)
+        print(f"## {d} (first {args.first:g} L_vb of trace; routes without {sorted(skip)})")
+        print("| policy | outside, first (L_vb) | outside, after | laid | precision | "
+              "without the first part's loss |")  # fmt: skip
+        print("|---|---|---|---|---|---|")
+        for p, m in rep["summary"].items():
+            print(f"| {p} | {m['outside_first']:.1f} | {m['outside_after']:.1f} | "
+                  f"{m['laid']:.0f} | {m['precision']:.3f} | "
+                  f"{m['precision_without_first']:.3f} |")  # fmt: skip
+        table: dict[tuple[str, int], dict[str, float]] = defaultdict(dict)
+        for e in rep["episodes"]:
+            table[(e["target"], e["seed"])][e["policy"]] = e["outside_first"]
+        pols = list(rep["summary"])
+        print(f"\n| route | seed | {' | '.join(pols)} |")
+        print("|---|---|" + "---|" * len(pols))
+        for (t, s), v in sorted(table.items()):
+            print(f"| {t} | {s} | " + " | ".join(f"{v.get(p, float('nan')):.1f}" for p in pols)
+                  + " |")  # fmt: skip
+        print()
+    if args.out:
+        args.out.write_text(json.dumps(reports, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,65 @@
+"""benchmarks/outside_where.py: the outside length of a trace, split at its first L_vb,
+against closed forms; and the reading of a cnt-evaluate directory."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from benchmarks import outside_where as ow  # the repo root is on pytest's pythonpath
+
+
+def _trace(points: list[tuple[float, float]], step: float = 0.5) -> np.ndarray:
+    """A polyline through ``points`` sampled every ``step`` (nodes as the trace's)."""
+    pts = np.asarray(points, dtype=float)
+    out = []
+    for a, b in itertools.pairwise(pts):
+        n = round(float(np.hypot(*(b - a))) / step)
+        out += [a + (b - a) * k / n for k in range(n)]
+    return np.array([*out, pts[-1]])
+
+
+def test_outside_lengths_split_a_known_excursion() -> None:
+    """Along x for 10, out to z = 30 and back (a 20 + 20 excursion, of which 2 x 10 + 0.5
+    beyond the half-width 20), then along x: the excursion lies within the first 60 L_vb
+    of trace, none after. Nodes 0.5 apart resolve each of the two crossings of the
+    corridor's edge to half a node: +-1 in all."""
+    route = np.array([[0.0, 0.0], [200.0, 0.0]])
+    trace = _trace([(0, 0), (10, 0), (10, 30), (10.5, 30), (10.5, 0), (100, 0)])
+    early, late, laid = ow.outside_lengths(trace, route, 20.0, first=60.0)
+    assert laid == pytest.approx(10 + 30 + 0.5 + 30 + 89.5)
+    assert early == pytest.approx(2 * 10 + 0.5, abs=1.0)
+    assert late == 0.0
+    # the same excursion after the first 10 L_vb counts as "after"
+    early, late, _ = ow.outside_lengths(trace, route, 20.0, first=10.0)
+    assert early == 0.0 and late == pytest.approx(2 * 10 + 0.5, abs=1.0)
+    # inside a corridor wider than the excursion: nothing outside
+    assert ow.outside_lengths(trace, route, 31.0, first=60.0)[:2] == (0.0, 0.0)
+
+
+def test_analyse_reads_an_evaluation_directory(tmp_path) -> None:
+    """Per-policy means and per-episode rows from episodes.json + traces.npz, the
+    keep-out route skipped; the route's width is the held-out route's."""
+    from cnt_env.task import routes
+
+    w = routes.held_out("u_turn").width
+    inside = _trace([(0, 0), (100, 0)])
+    # out to w + 10 and back within the first 60 L_vb: 2 x 10 + 1 outside
+    excursion = _trace([(0, 0), (5, 0), (5, w + 10), (6, w + 10), (6, 0), (100, 0)])
+    route = np.array([[0.0, 0.0], [300.0, 0.0]])
+    rows = [{"policy": "a", "target": "u_turn", "seed": 0, "score": 1.0},
+            {"policy": "b", "target": "u_turn", "seed": 0, "score": 0.9},
+            {"policy": "b", "target": "detour_block", "seed": 0, "score": 0.5}]  # fmt: skip
+    (tmp_path / "episodes.json").write_text(json.dumps(rows))
+    np.savez(tmp_path / "traces.npz", trace_0=inside, target_0=route, trace_1=excursion,
+             target_1=route, trace_2=excursion, target_2=route)  # fmt: skip
+    rep = ow.analyse(tmp_path, 60.0, {"detour_block"})
+    assert rep["summary"]["a"]["outside_first"] == 0.0
+    assert rep["summary"]["a"]["precision"] == 1.0
+    b = rep["summary"]["b"]
+    assert b["episodes"] == 1 and b["outside_first"] == pytest.approx(21.0, abs=1.0)
+    assert b["precision_without_first"] == 1.0 > b["precision"]
+    assert [e["target"] for e in rep["episodes"]] == ["u_turn", "u_turn"]
