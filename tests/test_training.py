@@ -454,7 +454,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     agent on the calibrated surrogate, detour 3 in 10, and is the last stage of the
     shipped residual agent, whose policies/pretrained/ppo_residual.yml is that stage's;
     sac_residual.yml (and its _sde twin) trains residual SAC on the calibrated surrogate,
-    detour 2 in 9."""
+    detour 2 in 9; ppo_residual_start_model.yml goes on training the shipped agent on the
+    model itself, on the first control steps of its episodes."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -469,7 +470,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     assert surrogate != model
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
                 "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33),
-                "ppo_residual_linear033_finetune.yml": (MODEL["drag_law"], 0.33)}  # fmt: skip
+                "ppo_residual_linear033_finetune.yml": (MODEL["drag_law"], 0.33),
+                "ppo_residual_start_model.yml": model}  # fmt: skip
     # (detours, families) of each weighted twin; a curriculum twin's first draw, and its
     # last stage's (every family once: (1, len(FAMILIES)))
     once = (1, len(FAMILIES))
