@@ -185,7 +185,6 @@ class RouteFollower:
         band_memory: int = 0,
         run_lead: float | None = None,
         run_exit: float = 45.0,
-        settle: int = 0,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -225,10 +224,6 @@ class RouteFollower:
         if not (math.isfinite(run_exit) and 30.0 <= run_exit < 90.0):
             raise ValueError(f"run_exit must be an angle in [30, 90) degrees, got {run_exit!r}")
         self.run_exit = float(run_exit)
-        if int(settle) < 0:
-            raise ValueError(f"settle must be >= 0 control steps, got {settle!r}")
-        self.settle = int(settle)
-        self._steps = 0  # control steps given on the current route
         if int(band_memory) < 0:
             raise ValueError(f"band_memory must be >= 0 control steps, got {band_memory!r}")
         self.band_memory = int(band_memory)
@@ -276,7 +271,6 @@ class RouteFollower:
             self._prev_centre = self._prev_contact = None
             self._phis.clear()
             self._run = False
-            self._steps = 0
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
         self._s_next = min(float(o[self.slices["progress"].start]) * s[-1] + self.spacing, s[-1])
@@ -392,8 +386,6 @@ class RouteFollower:
         next step, steering the band's centre again, turns it back, every other step."""
         if self.run_centre == 0 or len(self._phis) < self.run_centre:
             return False
-        if self._steps < self.settle:  # the first flows steer the warm band, not a run
-            return False
         if self._run and self.run_exit > 30.0:
             return steps_sign(self._phis[-1], self.run_exit) != 0
         signs = {steps_sign(p) for p in self._phis}
@@ -478,7 +470,6 @@ class RouteFollower:
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
         self._phis.append(phi)
-        self._steps += 1
         return action_from_flow(vbar, phi, self.vbar_max)
 
 
