@@ -281,6 +281,8 @@ def test_route_keepouts_stay_off_the_route() -> None:
         ({"waypoints": [[0, 0], [40, 0], [40, 60]], "keepouts": [[[20, 30], [60, 30], [60, 40]]]},
          "leg 1"),
         ({"waypoints": [[0, 0], [80, 0]], "pads": [[[40, 19], [40, 30]]]}, "pad 0"),
+        # corner to corner through a rectangle: no edge is crossed properly
+        ({"waypoints": [[0, 0], [50, 50]], "keepouts": [{"rect": [20, 20, 30, 30]}]}, "leg 0"),
     ],
 )  # fmt: skip
 def test_a_route_whose_parts_contradict_is_refused_with_its_reason(spec, what) -> None:

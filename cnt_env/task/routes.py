@@ -62,7 +62,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cnt_env.task import targets as targets_mod
-from cnt_env.task.geometry import inside_polygon, segment_distance, segments_cross
+from cnt_env.task.geometry import (
+    inside_polygon,
+    nearest_on_boundary,
+    segment_distance,
+    segments_cross,
+)
 from cnt_env.task.targets import cumulative_length
 
 __all__ = [
@@ -205,7 +210,7 @@ def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
             raise ValueError(f"waypoint {i} {pts[i].tolist()} lies inside keep-out {k}: {fix}")
         edges = list(itertools.pairwise(np.vstack([poly, poly[:1]])))
         for i, (a, b) in enumerate(legs):
-            if any(segments_cross(a, b, c, d) for c, d in edges):
+            if any(segments_cross(a, b, c, d) for c, d in edges) or _through_vertices(a, b, poly):
                 raise ValueError(f"leg {i} of the route ({a.tolist()} -> {b.tolist()}) "
                                  f"crosses keep-out {k}: {fix}")  # fmt: skip
     for j, (c, d) in enumerate(pads):
@@ -214,6 +219,26 @@ def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
             raise ValueError(f"pad {j} {[c.tolist(), d.tolist()]} is {gap:.3g} L_vb from the "
                              f"route, outside its corridor (half-width {width:.3g}): move the "
                              "pad onto the corridor or widen it")  # fmt: skip
+
+
+def _through_vertices(a: FloatArray, b: FloatArray, poly: FloatArray) -> bool:
+    """Whether leg a-b enters ``poly`` between vertices it passes through (a leg from
+    corner to corner of a rectangle crosses no edge properly): the midpoints between
+    the leg's ends and the vertices on it, tested for insideness."""
+    ab = b - a
+    length2 = float(ab @ ab)
+    if length2 == 0.0:  # a repeated waypoint: its point was tested with the waypoints
+        return False
+    t = (poly - a) @ ab / length2
+    off = np.abs((poly[:, 0] - a[0]) * ab[1] - (poly[:, 1] - a[1]) * ab[0]) / math.sqrt(length2)
+    on = t[(off <= 1e-9 * (1.0 + math.sqrt(length2))) & (t > 0.0) & (t < 1.0)]
+    if on.size == 0:
+        return False
+    ts = np.sort(np.concatenate([[0.0, 1.0], on]))
+    mids = a + 0.5 * (ts[:-1] + ts[1:])[:, None] * ab
+    # strictly inside: a leg along an edge has its midpoints on the boundary
+    clear = nearest_on_boundary(mids, poly)[1] > 1e-9 * (1.0 + math.sqrt(length2))
+    return bool((inside_polygon(mids, poly) & clear).any())
 
 
 def rectangle(x0: float, z0: float, x1: float, z1: float) -> FloatArray:
