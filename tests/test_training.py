@@ -197,6 +197,34 @@ def test_validation_eval_routes_are_fixed_family_draws() -> None:
         HeldOutCycle(gym.make(ENV_ID, **SMALL), ["nope"])
 
 
+def test_learning_curve_panels_part_runs_trained_on_different_envs(tmp_path: Path) -> None:
+    """Two stages of one agent on different envs (the shipped residual agent: the
+    surrogate, then the calibrated surrogate with detours weighted) get a panel each, so
+    each has the baselines of its own env; runs on the same env share one."""
+    import yaml
+
+    from training.evaluate import curve_groups
+
+    ev = [{"training.callbacks.HeldOutEval": {"eval_targets": ["validation"],
+                                               "n_eval_episodes": 1}}]  # fmt: skip
+    envs = {"a": {"drag_law": "printed", "delta_bar": 1.0},
+            "b": {"drag_law": "printed", "delta_bar": 1.0},
+            "c": {"drag_law": "printed", "delta_bar": 1.0, "flow_gain": 1.44,
+                  "families": ["straight", "detour", "detour"]}}  # fmt: skip
+    runs = []
+    for name, kw in envs.items():
+        run = tmp_path / name
+        run.mkdir()
+        cfg = {"CNTDeposit-v0": {"env_kwargs": kw, "callback": ev}}
+        (run / "config.yml").write_text(yaml.safe_dump(cfg))
+        np.savez(run / "evaluations.npz", timesteps=np.array([1]), results=np.array([[0.5]]))
+        runs.append(run)
+    groups = curve_groups(runs)
+    assert sorted(len(v) for v in groups.values()) == [1, 2]
+    labels = sorted(k[1] for k in groups)
+    assert labels == ["printed law, δ̄ 1", "printed law, δ̄ 1, flow x1.44, detour 2 in 3"]
+
+
 def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: Path) -> None:
     """A run evaluated on validation routes is drawn with the follower and random scored
     on those same routes, not with held-out rows; cnt-evaluate caches them in its own

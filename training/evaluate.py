@@ -441,18 +441,44 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
     return scores
 
 
-def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) -> bool:
-    """Mean return (= final score) of each run's EvalCallback against training steps, one
-    panel per evaluation set, with the baselines on that set as dashed lines: from the
-    evaluated ``rows`` for held-out routes, from :func:`eval_set_baselines` for
-    validation routes. Labels give each run's sample count and wall time."""
-    groups: dict[tuple[str, ...], list] = defaultdict(list)
+def _env_label(cfg: dict[str, Any]) -> str:
+    """The training env a run's EvalCallback ran on, in short: its physics (the env's
+    default, the model, unless the config sets the drag law, delta_bar or a flow gain) and
+    whether its routes are drawn from a weighted list of families."""
+    kw = env_settings(cfg)[0]
+    parts = [f"{kw['drag_law']} law" if "drag_law" in kw else "model law"]
+    if "delta_bar" in kw:
+        parts.append(f"δ̄ {kw['delta_bar']:g}")
+    if float(kw.get("flow_gain", 1.0)) != 1.0:
+        parts.append(f"flow x{kw['flow_gain']:g}")
+    if kw.get("families"):
+        fams = list(kw["families"])
+        parts.append(f"detour {fams.count('detour')} in {len(fams)}")
+    return ", ".join(parts)
+
+
+def curve_groups(runs: Sequence[Path]) -> dict[tuple[tuple[str, ...], str], list]:
+    """The runs with an ``evaluations.npz``, grouped by (evaluation routes, training env
+    label): ``(run, policy name, label, timesteps, results)`` per run."""
+    groups: dict[tuple[tuple[str, ...], str], list] = defaultdict(list)
     for run in runs:
         path = Path(run) / "evaluations.npz"
         if path.is_file():
             d = np.load(path)
-            targets, _, name, label, _ = _run_info(Path(run))
-            groups[targets].append((Path(run), name, label, d["timesteps"], d["results"]))
+            targets, _, name, label, cfg = _run_info(Path(run))
+            key = (targets, _env_label(cfg))
+            groups[key].append((Path(run), name, label, d["timesteps"], d["results"]))
+    return groups
+
+
+def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) -> bool:
+    """Mean return (= final score) of each run's EvalCallback against training steps, one
+    panel per evaluation set and training env (a stage of a run that changes env gets
+    its own), with the baselines on that set as dashed lines: from the evaluated
+    ``rows`` for held-out routes, from :func:`eval_set_baselines` for validation routes
+    (scored on the panel's first run's env). Labels give each run's sample count and
+    wall time."""
+    groups = curve_groups(runs)
     if not groups:
         return False
     import matplotlib
@@ -461,7 +487,7 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(groups), figsize=(6 * len(groups), 4), squeeze=False)
-    for ax, (targets, curves) in zip(axes.flat, groups.items(), strict=True):
+    for ax, ((targets, env_label), curves) in zip(axes.flat, groups.items(), strict=True):
         for _, name, label, t, r in curves:
             m, s = r.mean(axis=1), r.std(axis=1)
             color = COLORS.get(name)
@@ -481,7 +507,7 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
             ax.axhline(v, ls="--", color=COLORS.get(name, "k"), lw=1, label=f"{name} (same routes)")
         ax.set_xlabel("training steps")
         ax.set_ylabel("eval return = final score Φ")
-        ax.set_title(f"EvalCallback on {where}", fontsize=9)
+        ax.set_title(f"EvalCallback on {where}\n(training env: {env_label})", fontsize=9)
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "learning_curves.png", dpi=90)
