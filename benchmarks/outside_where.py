@@ -36,8 +36,9 @@ def outside_lengths(trace: np.ndarray, route: np.ndarray, width: float,
     against the corridor of half-width ``width`` around ``route`` (m, 2), in the trace's
     frame."""
     from cnt_env.task.scoring import distances
+    from cnt_env.task.targets import cumulative_length
 
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(trace, axis=0).T))])
+    s = cumulative_length(trace)
     weight = np.gradient(s) if len(s) > 1 else np.zeros(1)  # each node's share of the arc
     out = distances(trace, route) > width
     early = s < first
