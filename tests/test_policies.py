@@ -411,6 +411,72 @@ def test_route_follower_unhooks_away_from_the_steps_axis() -> None:
     assert turned == pytest.approx(66.0 - math.degrees(0.5))  # 66° -> 37°
 
 
+def test_start_flow_answers_the_warm_swing_by_its_phase() -> None:
+    """``start_flow``: a window that is one straight swing along the steps (the swing's
+    end) gets a flow 30° off its heading, upstream of the warm flow; a window that shows
+    the swing's U-turn (under way) a flow against its heading. Mirror images in z and in
+    the warm flow's x give mirrored flows; a route leading along the steps against the
+    heading gets none."""
+    from policies.route_follower import start_flow
+
+    z = np.linspace(64.0, 4.0, 16)
+    straight = np.column_stack([np.zeros(16), z])  # heading -z, one straight swing
+    theta = np.linspace(-0.7, np.pi / 2, 16)  # up to the U-turn's cap, then down
+    turn = np.column_stack([-4.4 * np.sin(theta), 4.0 + 45.0 * np.cos(theta)])
+    downstream = np.array([0.28, 0.0])  # the warm flow along +x
+    across, up, down = np.array([1.0, 0.0]), np.array([0.0, 1.0]), np.array([0.0, -1.0])
+
+    def deg(window: np.ndarray, flow=downstream, lead=across) -> float | None:
+        phi = start_flow(window, flow, lead)
+        return None if phi is None else math.degrees(phi)
+
+    assert deg(straight) == pytest.approx(-120.0)
+    assert deg(straight * [1, -1]) == pytest.approx(120.0)
+    assert deg(straight, flow=-downstream) == pytest.approx(-60.0)
+    assert deg(turn) == pytest.approx(90.0)  # heading -z
+    assert deg(turn * [1, -1]) == pytest.approx(-90.0)
+    # a route along the steps against the heading wants the swing's turn: no override;
+    # along the heading, or diagonal (45°), it keeps the start flow
+    assert deg(straight, lead=up) is None and deg(turn, lead=up) is None
+    assert deg(straight * [1, -1], lead=down) is None
+    assert deg(straight, lead=down) == pytest.approx(-120.0)
+    assert deg(straight, lead=np.array([1.0, 1.0])) == pytest.approx(-120.0)
+
+
+def test_route_follower_overrides_only_a_routes_first_flow() -> None:
+    """``start_swing``: the first act() after a new route gives the start flow at v̄_max;
+    the next steps, a follower with the option off and a route with keep-outs steer as
+    before."""
+    from cnt_env.task.routes import Route
+    from cnt_env.task.spaces import ObservationLayout
+    from policies import RouteFollower
+
+    layout = ObservationLayout(16, 16, (2.0, 8.0, 77.5, 155.0), route=True)
+    sl = layout.slices
+    obs = np.zeros(layout.size)
+    obs[sl["trace"]] = np.column_stack([np.zeros(16), np.linspace(64.0, 4.0, 16)]).ravel()
+    obs[sl["target"]] = np.column_stack([2.0 * np.arange(1, 17), np.zeros(16)]).ravel()
+    obs[sl["route"]] = [15.0, 1000.0, 1000.0]
+    obs[sl["flow"]] = [0.28, 0.0]
+
+    class Env:
+        target = Route([(0.0, 0.0), (60.0, 0.0)], width=15.0)
+
+    def flows(**kw) -> list[tuple[float, float]]:
+        pol = RouteFollower(sl, 0.13, **kw)
+        pol._env = Env()
+        return [flow_from_action(pol.act(obs), 0.13) for _ in range(2)]
+
+    on, off = flows(), flows(start_swing=False)
+    Env.target = Route([(0.0, 0.0), (60.0, 0.0)], width=15.0,
+                       keepouts=(np.array([[80.0, -5.0], [90.0, -5.0], [90.0, 5.0]]),))  # fmt: skip
+    assert np.array(flows()) == pytest.approx(np.array(flows(start_swing=False)))
+    assert on[0][0] == pytest.approx(0.13, rel=1e-4)
+    assert math.degrees(on[0][1]) == pytest.approx(-120.0, abs=1e-3)
+    assert on[1] == pytest.approx(off[1])  # the follower's memory saw its own flow
+    assert abs(math.degrees(off[0][1]) + 120.0) > 30.0  # the follower's own first flow
+
+
 def test_algorithm_comes_from_the_name_else_the_config_beside_the_model(tmp_path) -> None:
     """algo_of: an explicit algorithm, else the file name's, else ``run: algo`` of the
     config beside the model (a run's best_model.zip with its yml); neither is a clear
