@@ -148,7 +148,10 @@ keeps those two answers. Chosen on routes outside the held-out set (study "2026-
 start swing" in ``benchmarks/results/follower_study_converged.jsonl``, ``--variant
 'swing=' --variant 'off={"start_swing": false}'``): 7 training families x seeds 0-3, mean
 **0.967** against 0.960 (13 episodes up by up to 0.045, 6 down by up to 0.040, 9
-unchanged); the 12 validation routes in the note of benchmarks/RESULTS.md.
+unchanged); the 12 validation routes 0.906 against 0.886; the detour family, seeds 0-7,
+0.794 against 0.778 for the follower that keeps its own first flow on routes with
+keep-outs, none shorted (variant ``swing_ko`` of that study; ``swing`` there is the
+follower with that exclusion, which was dropped).
 """
 
 from __future__ import annotations
@@ -486,7 +489,7 @@ class RouteFollower:
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
         self._phis.append(phi)
-        if first and self.start_swing and not self._route.keepouts:
+        if first and self.start_swing:
             lead = self._route_pts[min(len(self._route_pts) - 1, 10)] - self._route_pts[0]
             start = start_flow(past, o[self.slices["flow"]], lead)
             if start is not None:
@@ -522,9 +525,7 @@ def start_flow(past: np.ndarray, flow: np.ndarray, lead: np.ndarray) -> float | 
     one straight swing along the steps, :data:`SWING_STRAIGHT`), a flow 30° off its
     heading, upstream of the warm flow, which holds the swing from turning back across
     the band. A route that leads along the steps against the heading wants that turn:
-    None. (Measured on routes without keep-outs; the follower keeps its own first flow
-    on a route with keep-outs, where on two validation detours the start flow led to a
-    short.)"""
+    None (on two validation detours that lead so, the start flow led to a short)."""
     heading = math.copysign(1.0, float(past[-1, 1] - past[0, 1]))  # along ±z
     if abs(lead[1]) > abs(lead[0]) and lead[1] * heading < 0.0:
         return None

@@ -189,8 +189,11 @@ def test_route_follower_plan_only_acts_where_there_are_keep_outs() -> None:
                  "keepouts": [{"rect": [20, 8, 60, 40]}]}  # fmt: skip
         obs, _ = env.reset(seed=0, options={"target": block})
         assert isinstance(env.unwrapped.target, routes.Route)
-        _, phi_plan = flow_from_action(RouteFollower.from_env(env).act(obs), 0.13)
-        _, phi_flat = flow_from_action(RouteFollower.from_env(env, plan=False).act(obs), 0.13)
+        # the follower's own first flow (the start flow ignores the plan: start_flow)
+        follower = RouteFollower.from_env(env, start_swing=False)
+        flat = RouteFollower.from_env(env, plan=False, start_swing=False)
+        _, phi_plan = flow_from_action(follower.act(obs), 0.13)
+        _, phi_flat = flow_from_action(flat.act(obs), 0.13)
         assert phi_plan < phi_flat  # turned down, away from the block
     finally:
         env.close()
@@ -445,8 +448,8 @@ def test_start_flow_answers_the_warm_swing_by_its_phase() -> None:
 
 def test_route_follower_overrides_only_a_routes_first_flow() -> None:
     """``start_swing``: the first act() after a new route gives the start flow at v̄_max;
-    the next steps, a follower with the option off and a route with keep-outs steer as
-    before."""
+    the next steps, a follower with the option off and a route that leads along the
+    steps against the swing's heading steer as before."""
     from cnt_env.task.routes import Route
     from cnt_env.task.spaces import ObservationLayout
     from policies import RouteFollower
@@ -468,8 +471,7 @@ def test_route_follower_overrides_only_a_routes_first_flow() -> None:
         return [flow_from_action(pol.act(obs), 0.13) for _ in range(2)]
 
     on, off = flows(), flows(start_swing=False)
-    Env.target = Route([(0.0, 0.0), (60.0, 0.0)], width=15.0,
-                       keepouts=(np.array([[80.0, -5.0], [90.0, -5.0], [90.0, 5.0]]),))  # fmt: skip
+    Env.target = Route([(0.0, 0.0), (0.0, 60.0)], width=15.0)  # leads +z: wants the turn
     assert np.array(flows()) == pytest.approx(np.array(flows(start_swing=False)))
     assert on[0][0] == pytest.approx(0.13, rel=1e-4)
     assert math.degrees(on[0][1]) == pytest.approx(-120.0, abs=1e-3)
