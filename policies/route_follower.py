@@ -150,8 +150,8 @@ start swing" in ``benchmarks/results/follower_study_converged.jsonl``, ``--varia
 **0.967** against 0.960 (13 episodes up by up to 0.045, 6 down by up to 0.040, 9
 unchanged); the 12 validation routes 0.906 against 0.886; the detour family, seeds 0-7,
 0.794 against 0.778 for the follower that keeps its own first flow on routes with
-keep-outs, none shorted (variant ``swing_ko`` of that study; ``swing`` there is the
-follower with that exclusion, which was dropped).
+keep-outs, none shorted (variant ``swing_skip_keepouts`` of those rows is the follower
+with that exclusion, which was dropped).
 """
 
 from __future__ import annotations
@@ -490,7 +490,8 @@ class RouteFollower:
             phi += self.unhook_turn(phi)
         self._phis.append(phi)
         if first and self.start_swing:
-            lead = self._route_pts[min(len(self._route_pts) - 1, 10)] - self._route_pts[0]
+            k = min(len(self._route_pts) - 1, max(1, round(10.0 / self.plan_spacing)))
+            lead = self._route_pts[k] - self._route_pts[0]  # the route's first 10 L_vb
             start = start_flow(past, o[self.slices["flow"]], lead)
             if start is not None:
                 return action_from_flow(self.vbar_max, start, self.vbar_max)
