@@ -75,7 +75,9 @@ def search(job: dict[str, Any]) -> dict[str, Any]:
 
     env_kwargs, max_steps = env_settings(load_config(job["config"]))
     env = make_env(env_kwargs, max_steps)
-    follower = RouteFollower.from_env(env)
+    # the follower's own first flow is the reference: the start flow (start_swing) is the
+    # rule this search led to, and later steps do not depend on it
+    follower = RouteFollower.from_env(env, start_swing=False)
     obs, _ = env.reset(seed=job["seed"], options={"target": job["target"]})
     follower.reset(job["seed"])
     vmax = env.unwrapped.vbar_max
