@@ -83,25 +83,29 @@ def search(job: dict[str, Any]) -> dict[str, Any]:
     vmax = env.unwrapped.vbar_max
     t0 = time.perf_counter()
     snapshot = copy.deepcopy((env, follower))
-    reference = _continue(*copy.deepcopy(snapshot), obs, (), job["until"], job["first"])
+    env.close()
+
+    def rollout(forced: tuple[np.ndarray, ...]) -> dict[str, Any]:
+        e, f = copy.deepcopy(snapshot)
+        try:
+            return _continue(e, f, obs, forced, job["until"], job["first"])
+        finally:
+            e.close()
+
+    reference = rollout(())
     phis = 2 * np.pi * np.arange(job["directions"]) / job["directions"]
     flows = [action_from_flow(vmax, float(p), vmax) for p in phis]
-    best: dict[str, Any] | None = None
     tried = []
     for combo in itertools.product(range(len(phis)), repeat=job["steps"]):
-        e, f = copy.deepcopy(snapshot)
-        r = _continue(e, f, obs, tuple(flows[i] for i in combo), job["until"], job["first"])
-        e.close()
+        r = rollout(tuple(flows[i] for i in combo))
         r["phi"] = [round(float(phis[i]), 3) for i in combo]
         tried.append(r)
-        total = r["outside_first"] + r["outside_after"]
-        if best is None or total < best["outside_first"] + best["outside_after"]:
-            best = r
-    env.close()
+    snapshot[0].close()
     return {
         "target": job["target"], "seed": job["seed"], "steps_searched": job["steps"],
         "directions": job["directions"], "first": job["first"], "until": job["until"],
-        "follower": reference, "best": best,
+        "follower": reference,
+        "best": min(tried, key=lambda r: r["outside_first"] + r["outside_after"]),
         "best_first": min(tried, key=lambda r: r["outside_first"]),
         "combos": len(tried), "wall_s": round(time.perf_counter() - t0, 1),
         "tried": [[r["phi"], round(r["outside_first"], 2), round(r["outside_after"], 2)]
