@@ -40,13 +40,10 @@ EVAL = ROOT / "training/configs/eval.yml"
 def _outside(env: Any, first: float) -> tuple[float, float, float]:
     """``(outside in the first L_vb, outside after, laid)`` of the episode's trace so far."""
     from benchmarks.outside_where import outside_lengths
+    from training.evaluate import episode_frame
 
-    base = env.unwrapped
-    trace = base.sim.trace()
-    n0 = base.episode_start
-    origin = trace[n0 - 1, [0, 2]]
-    xz = trace[n0 - 1 :, [0, 2]] - origin
-    return outside_lengths(xz, base.target_path - origin, float(base.target.width), first)
+    xz, target = episode_frame(env.unwrapped)
+    return outside_lengths(xz, target, float(env.unwrapped.target.width), first)
 
 
 def _continue(env: Any, follower: Any, obs: Any, forced: tuple[np.ndarray, ...],

@@ -148,6 +148,29 @@ def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
         assert 0.0 <= r["score_mean"] <= 1.0
 
 
+def test_episode_frame_is_relative_to_the_contact_at_reset() -> None:
+    """The results' frame: the trace from the contact point at reset, and the route (which
+    starts there), both shifted so that point is the origin."""
+    from training.common import make_env
+    from training.evaluate import episode_frame
+
+    env = make_env(dict(SMALL), 3)
+    env.reset(seed=0, options={"target": "u_turn"})
+    for _ in range(2):
+        env.step(np.array([0.5, 0.0], dtype=np.float32))
+    base = env.unwrapped
+    trace, target = episode_frame(base)
+    full = base.sim.trace()
+    # the route starts at the contact point, which lies within a node's motion of the
+    # last deposited node
+    assert np.array_equal(trace[0], [0.0, 0.0]) and np.allclose(target[0], 0.0, atol=1e-3)
+    assert len(trace) == len(full) - base.episode_start + 1 > 2
+    shift = full[base.episode_start - 1, [0, 2]]
+    assert np.array_equal(trace[-1], full[-1, [0, 2]] - shift)
+    assert np.allclose(target + shift, base.target_path)
+    env.close()
+
+
 def test_evaluate_reuses_episodes_and_redoes_a_changed_baseline(tmp_path: Path) -> None:
     """--reuse keeps a fully evaluated policy's episodes (the same rows, not re-run);
     --redo runs a policy again even though the reused results have it."""

@@ -126,6 +126,16 @@ def _play(env, policy, obs) -> tuple[int, float, dict[str, Any]]:
             return steps, ret, info
 
 
+def episode_frame(base: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The episode's trace so far (the contact point at reset first) and its target
+    polyline, both in the substrate plane (x, z) relative to that contact point: the frame
+    of the results' plots and of ``benchmarks/outside_where.py``. ``base`` is the
+    unwrapped env."""
+    trace = base.sim.trace()
+    origin = trace[base.episode_start - 1, [0, 2]]
+    return trace[base.episode_start - 1 :, [0, 2]] - origin, base.target_path - origin
+
+
 def run_episode(job: dict[str, Any]) -> dict[str, Any]:
     """One episode of ``job`` = {policy, spec, target, seed, env_kwargs, max_steps,
     save_dir}; returns the final metrics and the trace."""
@@ -142,9 +152,7 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
     steps, ret, info = _play(env, policy, obs)
     base = env.unwrapped
     corridor = getattr(base.target, "width", None)  # route task: the corridor half-width
-    trace = base.sim.trace()
-    n0 = base.episode_start
-    origin = trace[n0 - 1, [0, 2]]
+    trace, target = episode_frame(base)
     row = {
         "policy": job["policy"], "target": job["target"], "seed": job["seed"],
         **{k: float(info[k]) for k in TERMS}, "return": ret,
@@ -156,8 +164,8 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
     env.close()
     return {
         "row": row,
-        "trace": trace[n0 - 1 :, [0, 2]] - origin,
-        "target_points": base.target_path - origin,
+        "trace": trace,
+        "target_points": target,
         "corridor": None if corridor is None else float(corridor),
         "episode_file": str(rec[-1]) if rec else None,
     }
