@@ -12,7 +12,9 @@ flow (its lag: docs/task.md): a loss that the steady steering does not show.
 
 prints, per policy, the mean outside length in the first ``--first`` L_vb and after, the
 precision without the first part's loss, and the per-episode first-part table; with
-``--out`` it writes them as JSON (one entry per directory).
+``--out`` it writes them as JSON (one entry per directory). With ``--legs ROUTE`` it
+prints instead, per policy, the outside length per episode on that route by its nearest
+leg and side (where a detour's loss lies).
 """
 
 from __future__ import annotations
@@ -43,6 +45,45 @@ def outside_lengths(trace: np.ndarray, route: np.ndarray, width: float,
     out = distances(trace, route) > width
     early = s < first
     return (float(weight[out & early].sum()), float(weight[out & ~early].sum()), float(s[-1]))
+
+
+def outside_by_leg(trace: np.ndarray, route: np.ndarray, width: float) -> np.ndarray:
+    """The length of a trace (n, 2) laid outside the corridor of half-width ``width``
+    around ``route`` (m, 2), by the route's leg nearest to each node and its side: an
+    (m - 1, 2) array, column 0 left of the leg's direction (90° anticlockwise in (x, z)),
+    column 1 right. Nodes are weighted as in :func:`outside_lengths`."""
+    from cnt_env.task.scoring import distances
+    from cnt_env.task.targets import cumulative_length
+
+    s = cumulative_length(trace)
+    weight = np.gradient(s) if len(s) > 1 else np.zeros(1)
+    out = distances(trace, route) > width
+    a, ab = route[:-1], np.diff(route, axis=0)  # (m-1, 2) legs
+    rel = trace[:, None, :] - a[None]  # (n, m-1, 2)
+    u = np.clip(np.einsum("nmk,mk->nm", rel, ab) / np.maximum((ab**2).sum(1), 1e-12), 0, 1)
+    gap = np.hypot(*np.moveaxis(rel - u[..., None] * ab[None], -1, 0))
+    leg = np.argmin(gap, axis=1)
+    left = (ab[leg, 0] * rel[np.arange(len(trace)), leg, 1]
+            - ab[leg, 1] * rel[np.arange(len(trace)), leg, 0]) > 0  # fmt: skip
+    by = np.zeros((len(ab), 2))
+    np.add.at(by, (leg[out], np.where(left[out], 0, 1)), weight[out])
+    return by
+
+
+def legs(results: Path, target: str) -> dict[str, list[list[float]]]:
+    """Per policy, the mean per episode of :func:`outside_by_leg` on the route
+    ``target`` of a cnt-evaluate directory."""
+    from cnt_env.task import routes
+
+    rows = json.loads((results / "episodes.json").read_text())
+    traces = np.load(results / "traces.npz")
+    width = routes.held_out(target).width
+    per: dict[str, list[np.ndarray]] = defaultdict(list)
+    for i, r in enumerate(rows):
+        if r["target"] == target and f"trace_{i}" in traces:
+            trace, route = (traces[f"{k}_{i}"].astype(np.float64) for k in ("trace", "target"))
+            per[r["policy"]].append(outside_by_leg(trace, route, width))
+    return {p: np.mean(v, axis=0).round(1).tolist() for p, v in per.items()}
 
 
 def analyse(results: Path, first: float, skip: set[str]) -> dict[str, Any]:
@@ -85,7 +126,24 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma separated routes left out (default: the keep-out route, "
                          "whose loss is its detour)")  # fmt: skip
     ap.add_argument("--out", type=Path, help="write the figures here (JSON)")
+    ap.add_argument(
+        "--legs", metavar="ROUTE", help="instead: the outside length per leg of this route and side"
+    )
     args = ap.parse_args(argv)
+    if args.legs:
+        for d in args.results:
+            by = legs(d, args.legs)
+            print(
+                f"## {d}: {args.legs}, outside (L_vb per episode) by nearest leg, "
+                "left / right of its direction"
+            )
+            n = len(next(iter(by.values()))) if by else 0
+            print("| policy | " + " | ".join(f"leg {j}" for j in range(n)) + " |")
+            print("|---|" + "---|" * n)
+            for p, v in by.items():
+                print(f"| {p} | " + " | ".join(f"{lft:.1f} / {rgt:.1f}" for lft, rgt in v) + " |")
+            print()
+        return 0
     skip = {t for t in args.skip.split(",") if t}
     reports = []
     for d in args.results:

@@ -63,3 +63,22 @@ def test_analyse_reads_an_evaluation_directory(tmp_path) -> None:
     assert b["episodes"] == 1 and b["outside_first"] == pytest.approx(21.0, abs=1.0)
     assert b["precision_without_first"] == 1.0 > b["precision"]
     assert [e["target"] for e in rep["episodes"]] == ["u_turn", "u_turn"]
+
+
+def test_outside_by_leg_finds_each_excursion_and_its_side() -> None:
+    """An L route, (0,0) -> (100,0) -> (100,100), w = 20: an excursion 30 to +z off the
+    first leg (its left, heading +x) and one 30 to +x off the second (its right, heading
+    +z), each 2 x 10 + 0.5 beyond the corridor (to half a node at each of its crossings)."""
+    route = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 100.0]])
+    trace = _trace([(0, 0), (40, 0), (40, 30), (40.5, 30), (40.5, 0), (100, 0), (100, 60),
+                    (130, 60), (130, 60.5), (100, 60.5), (100, 100)])  # fmt: skip
+    by = ow.outside_by_leg(trace, route, 20.0)
+    assert by.shape == (2, 2)
+    assert by[0, 0] == pytest.approx(20.5, abs=1.0) and by[0, 1] == 0.0
+    assert by[1, 1] == pytest.approx(20.5, abs=1.0) and by[1, 0] == 0.0
+    # the total is outside_lengths' (both parts)
+    early, late, _ = ow.outside_lengths(trace, route, 20.0, first=60.0)
+    assert by.sum() == pytest.approx(early + late)
+    # the mirror image (z -> -z) swaps the sides
+    mirror = ow.outside_by_leg(trace * [1, -1], route * [1, -1], 20.0)
+    assert np.allclose(mirror, by[:, ::-1])
