@@ -38,8 +38,9 @@ line). Without the route it uses the window's mean. Then:
   are not all in the observation) the follower **plans around them**: every route point
   nearer a keep-out than the band's half-extent plus ``clearance`` is moved out to that
   distance (:func:`plan_around`; the half-extent per axis is the widest the trace has
-  shown this episode, at least the measured amplitude across the steps, since a band
-  leaning off the x axis is wider than the curve says), and the aim is taken from
+  shown in the last ``band_memory`` = 8 control steps (0: this episode), at least the
+  measured amplitude across the steps, since a band leaning off the x axis is wider than
+  the curve says), and the aim is taken from
   ``behind`` L_vb before the furthest point reached (the progress runs ahead of the
   centre on a wide band; aiming from there cuts the keep-out's corner). A first probe
   with the plan and the repulsion together scored worse than the plan alone (0.34
@@ -124,7 +125,12 @@ seeds 8-15 0.662 against 0.751 at the defaults: over 16 seeds 0.695 (3 shorted; 
 on the rest) against **0.717** (1 shorted; 0.765). The widest band is a safety margin
 against the short, which zeroes a route; the defaults stay. (A probe that forgot only
 the first 8 or 12 control steps' band scored 0.587 and 0.506 on seeds 0-7 and was
-dropped.)
+dropped.) **After the start flow** (study "2026-11-29 band after the start flow", same
+file and command, detour family, seeds 0-15) the first swings are no longer the warm
+band's, and the recent band wins without a short: mean **0.877** at n = 8 against 0.784
+at 0, 0.834 at 16, 0.759 at 4 (2 of 16 shorted); on the 12 validation routes 0.927
+against 0.906 (four keep-out routes change: +0.13, +0.12, +0.03, -0.02; none shorted).
+So ``band_memory`` is 8 since 2026-11-29.
 The run's exit (study "2026-11-27 run exit" in
 ``benchmarks/results/follower_study_converged.jsonl``, same command, ``--variant
 'exit45={"run_exit": 45.0}'``; on the machine of that day, whose episodes differ in the
@@ -196,7 +202,7 @@ class RouteFollower:
         hook_tol: float = 2.0,
         unhook_away: bool = True,
         run_centre: int = 1,
-        band_memory: int = 0,
+        band_memory: int = 8,
         run_lead: float | None = None,
         run_exit: float = 45.0,
         start_swing: bool = True,
@@ -338,8 +344,8 @@ class RouteFollower:
         is often not the band that passes the keep-out: the first swings from the warm
         start (z half-extents 30-41 L_vb on the model against ~20 once the band has
         formed) and a run along the steps (its z spread is its length) hold the plan
-        out for the rest of the route. ``band_memory`` n > 0: the widest of the last n
-        control steps, the band as it is now."""
+        out for the rest of the route. ``band_memory`` n > 0 (default 8, module doc):
+        the widest of the last n control steps, the band as it is now."""
         if self.band_memory == 0:
             return np.maximum(self._half, half)
         self._bands.append(np.asarray(half, dtype=float))

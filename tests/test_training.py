@@ -704,19 +704,24 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
 
 def test_the_finetune_config_acts_on_the_shipped_agents_own_base() -> None:
     """ppo_residual_shipped_detour_finetune.yml (the shipped agent's second stage) goes on
-    training the shipped agent once its base has the start flow the agent was given after
-    training: cnt-train's check (same algorithm, base with the same pinned options, frame
-    stack, normalisation) accepts the pair then and not before, and a config on today's
-    follower is refused."""
+    training the shipped agent once its base has the start flow and the recent plan band
+    the agent was given after training: cnt-train's check (same algorithm, base with the
+    same pinned options, frame stack, normalisation) accepts the pair then and not before,
+    and a config on today's follower is refused."""
     from training.common import CONFIG_DIR, load_config
     from training.train import check_trained_agent
 
     shipped = PRETRAINED_DIR / "ppo_residual.zip"
     config = load_config(CONFIG_DIR / SHIPPED_FINETUNE)
-    # the shipped agent's base gained the follower's start flow after training (its yml)
+    # the shipped agent's base gained the follower's start flow and its recent plan band
+    # after training (its yml): refused with either missing
+    base = config["env_wrapper"][0]["training.common.ResidualAction"]["base_kwargs"]
     with pytest.raises(ValueError, match="residual settings"):
         check_trained_agent(shipped, "ppo", config)
-    config["env_wrapper"][0]["training.common.ResidualAction"]["base_kwargs"]["start_swing"] = True
+    base["start_swing"] = True
+    with pytest.raises(ValueError, match="residual settings"):
+        check_trained_agent(shipped, "ppo", config)
+    base["band_memory"] = 8
     record = check_trained_agent(shipped, "ppo", config)
     assert record["path"] == str(shipped) and len(record["sha256"]) == 64
     with pytest.raises(ValueError, match="residual settings"):
