@@ -23,6 +23,7 @@ import argparse
 import json
 import sys
 from collections import defaultdict
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,17 +33,39 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+def _outside_nodes(trace: np.ndarray, route: np.ndarray,
+                   width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """``(arc length, weight, outside)`` per node of a trace (n, 2): its arc length from
+    the start, its share of the arc, and whether it lies farther than ``width`` from
+    ``route`` (m, 2)."""
+    from cnt_env.task.scoring import distances
+    from cnt_env.task.targets import cumulative_length
+
+    s = cumulative_length(trace)
+    weight = np.gradient(s) if len(s) > 1 else np.zeros(1)
+    return s, weight, distances(trace, route) > width
+
+
+def _episodes(results: Path, keep: Callable[[dict[str, Any]], bool]
+              ) -> Iterator[tuple[dict[str, Any], np.ndarray, np.ndarray, float]]:  # fmt: skip
+    """``(row, trace, route, width)`` of each episode of a cnt-evaluate directory whose
+    row ``keep`` accepts and whose trace was saved, in the results' frame (float64)."""
+    from cnt_env.task import routes
+
+    rows = json.loads((results / "episodes.json").read_text())
+    traces = np.load(results / "traces.npz")
+    for i, r in enumerate(rows):
+        if keep(r) and f"trace_{i}" in traces:
+            trace, route = (traces[f"{k}_{i}"].astype(np.float64) for k in ("trace", "target"))
+            yield r, trace, route, routes.held_out(r["target"]).width
+
+
 def outside_lengths(trace: np.ndarray, route: np.ndarray, width: float,
                     first: float) -> tuple[float, float, float]:  # fmt: skip
     """``(outside within the first L_vb, outside after, laid length)`` of a trace (n, 2)
     against the corridor of half-width ``width`` around ``route`` (m, 2), in the trace's
     frame."""
-    from cnt_env.task.scoring import distances
-    from cnt_env.task.targets import cumulative_length
-
-    s = cumulative_length(trace)
-    weight = np.gradient(s) if len(s) > 1 else np.zeros(1)  # each node's share of the arc
-    out = distances(trace, route) > width
+    s, weight, out = _outside_nodes(trace, route, width)
     early = s < first
     return (float(weight[out & early].sum()), float(weight[out & ~early].sum()), float(s[-1]))
 
@@ -52,12 +75,7 @@ def outside_by_leg(trace: np.ndarray, route: np.ndarray, width: float) -> np.nda
     around ``route`` (m, 2), by the route's leg nearest to each node and its side: an
     (m - 1, 2) array, column 0 left of the leg's direction (90° anticlockwise in (x, z)),
     column 1 right. Nodes are weighted as in :func:`outside_lengths`."""
-    from cnt_env.task.scoring import distances
-    from cnt_env.task.targets import cumulative_length
-
-    s = cumulative_length(trace)
-    weight = np.gradient(s) if len(s) > 1 else np.zeros(1)
-    out = distances(trace, route) > width
+    _, weight, out = _outside_nodes(trace, route, width)
     a, ab = route[:-1], np.diff(route, axis=0)  # (m-1, 2) legs
     rel = trace[:, None, :] - a[None]  # (n, m-1, 2)
     u = np.clip(np.einsum("nmk,mk->nm", rel, ab) / np.maximum((ab**2).sum(1), 1e-12), 0, 1)
@@ -73,31 +91,16 @@ def outside_by_leg(trace: np.ndarray, route: np.ndarray, width: float) -> np.nda
 def legs(results: Path, target: str) -> dict[str, list[list[float]]]:
     """Per policy, the mean per episode of :func:`outside_by_leg` on the route
     ``target`` of a cnt-evaluate directory."""
-    from cnt_env.task import routes
-
-    rows = json.loads((results / "episodes.json").read_text())
-    traces = np.load(results / "traces.npz")
-    width = routes.held_out(target).width
     per: dict[str, list[np.ndarray]] = defaultdict(list)
-    for i, r in enumerate(rows):
-        if r["target"] == target and f"trace_{i}" in traces:
-            trace, route = (traces[f"{k}_{i}"].astype(np.float64) for k in ("trace", "target"))
-            per[r["policy"]].append(outside_by_leg(trace, route, width))
+    for r, trace, route, width in _episodes(results, lambda r: r["target"] == target):
+        per[r["policy"]].append(outside_by_leg(trace, route, width))
     return {p: np.mean(v, axis=0).round(1).tolist() for p, v in per.items()}
 
 
 def analyse(results: Path, first: float, skip: set[str]) -> dict[str, Any]:
-    from cnt_env.task import routes
-
-    rows = json.loads((results / "episodes.json").read_text())
-    traces = np.load(results / "traces.npz")
     per_policy: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
     episodes = []
-    for i, r in enumerate(rows):
-        if r["target"] in skip or f"trace_{i}" not in traces:
-            continue
-        width = routes.held_out(r["target"]).width
-        trace, target = (traces[f"{k}_{i}"].astype(np.float64) for k in ("trace", "target"))
+    for r, trace, target, width in _episodes(results, lambda r: r["target"] not in skip):
         early, late, laid = outside_lengths(trace, target, width, first)
         per_policy[r["policy"]].append((early, late, laid))
         episodes.append({"policy": r["policy"], "target": r["target"], "seed": r["seed"],
