@@ -130,7 +130,10 @@ file and command, detour family, seeds 0-15) the first swings are no longer the 
 band's, and the recent band wins without a short: mean **0.877** at n = 8 against 0.784
 at 0, 0.834 at 16, 0.759 at 4 (2 of 16 shorted); on the 12 validation routes 0.927
 against 0.906 (four keep-out routes change: +0.13, +0.12, +0.03, -0.02; none shorted).
-So ``band_memory`` is 8 since 2026-11-29.
+So ``band_memory`` is 8 since 2026-11-29. With it, the ``clearance`` (study "2026-11-29
+clearance", detour, seeds 0-15): 0.784 at 0 (2 of 16 shorted), 0.877 at 2 and at 4 (the
+default), 0.851 at 6; a plan band that left out a run's steps (a run's spread along the
+steps is its length, not a band's width) scored 0.792 (1 shorted) and was dropped.
 The run's exit (study "2026-11-27 run exit" in
 ``benchmarks/results/follower_study_converged.jsonl``, same command, ``--variant
 'exit45={"run_exit": 45.0}'``; on the machine of that day, whose episodes differ in the
