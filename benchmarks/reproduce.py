@@ -93,6 +93,17 @@ CANDIDATES: dict[str, dict[str, Any]] = {
         "tail_clamp": "xyz",
         "delta_bar": 0.2,
     },
+    # sliding B (x fixed, z free) on C_fine's mesh: the sliding the paper's main text
+    # describes ("may slide" along the steps) at the converged delta; the coil, on the
+    # flat sticky substrate, is C_fine's
+    "B_fine": {
+        "drag_law": "linear",
+        "sliding": "B",
+        "snap": "jump",
+        "friction": 0.0,
+        "tail_clamp": "xyz",
+        "delta_bar": 0.2,
+    },
     # C_fine with the cohesive adhesion (docs/model.md §4): the vdW pull of finite range
     # on every free node near the substrate instead of eq. 1's jump from node to node
     "C_cohesive": {
