@@ -93,17 +93,6 @@ CANDIDATES: dict[str, dict[str, Any]] = {
         "tail_clamp": "xyz",
         "delta_bar": 0.2,
     },
-    # sliding B (x fixed, z free) on C_fine's mesh: the sliding the paper's main text
-    # describes ("may slide" along the steps) at the converged delta; the coil, on the
-    # flat sticky substrate, is C_fine's
-    "B_fine": {
-        "drag_law": "linear",
-        "sliding": "B",
-        "snap": "jump",
-        "friction": 0.0,
-        "tail_clamp": "xyz",
-        "delta_bar": 0.2,
-    },
     # C_fine with the cohesive adhesion (docs/model.md §4): the vdW pull of finite range
     # on every free node near the substrate instead of eq. 1's jump from node to node
     "C_cohesive": {
@@ -185,6 +174,10 @@ CANDIDATES: dict[str, dict[str, Any]] = {
 # contact that loses no energy (R0 converges in delta with it, 8.27 / 8.29 at delta 0.2 /
 # 0.1, where eq. 1 drifts 7.9 -> 9.2 from delta 1 to 0.2)
 CANDIDATES["printed_cohesive"] = dict(CANDIDATES["C_cohesive"], drag_law="printed")
+# C_fine with sliding B (x fixed, z free): the sliding the paper's main text describes
+# ("may slide" along the steps) at the converged delta; the coil, on the flat sticky
+# substrate, is C_fine's (RESULTS.md, issue 12, "Sliding B on the converged mesh")
+CANDIDATES["B_fine"] = dict(CANDIDATES["C_fine"], sliding="B")
 
 SERP = "serpentine"
 COIL = "coil"
