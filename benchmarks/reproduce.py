@@ -178,6 +178,10 @@ CANDIDATES["printed_cohesive"] = dict(CANDIDATES["C_cohesive"], drag_law="printe
 # ("may slide" along the steps) at the converged delta; the coil, on the flat sticky
 # substrate, is C_fine's (RESULTS.md, issue 12, "Sliding B on the converged mesh")
 CANDIDATES["B_fine"] = dict(CANDIDATES["C_fine"], sliding="B")
+# C_cohesive with sliding B: the contact that loses no energy (its wavelength in the
+# paper's band) with the sliding that lowers the amplitude on the steps (RESULTS.md,
+# issue 12, "Sliding B with the cohesive contact")
+CANDIDATES["B_cohesive"] = dict(CANDIDATES["C_cohesive"], sliding="B")
 
 SERP = "serpentine"
 COIL = "coil"
@@ -436,6 +440,8 @@ def run_point(
         "amplitude_cv": f(m["amplitude_cv"]),
         "wavelength_x": f(m["wavelength"]),
         "wavelength_cv": f(m["wavelength_cv"]),
+        "settled_amplitude_cv": f(m["settled_amplitude_cv"]),
+        "settled_wavelength_cv": f(m["settled_wavelength_cv"]),
         "wavelength_prog": f(m_prog["wavelength"]),
         "n_cycles": m["n_cycles"],
         "n_loops": m["n_loops"],
@@ -474,6 +480,8 @@ def remeasure(out: Path) -> int:
             pattern=m["pattern"], coil_radius=f_(m["coil_radius"]),
             amplitude=f_(m["amplitude"]), amplitude_cv=f_(m["amplitude_cv"]),
             wavelength_x=f_(m["wavelength"]), wavelength_cv=f_(m["wavelength_cv"]),
+            settled_amplitude_cv=f_(m["settled_amplitude_cv"]),
+            settled_wavelength_cv=f_(m["settled_wavelength_cv"]),
             wavelength_prog=f_(m["wavelength_progression"]), n_cycles=m["n_cycles"],
             n_loops=m["n_loops"], n_self_crossings=m["n_self_crossings"],
             loop_density=f_(m["loop_density"]),
@@ -609,15 +617,17 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
         got = hits[0]["pattern"] if hits else "not run"
         lines.append(f"| class at vbar = {groups['vbar']} | {cls} | {got} | |")
     lines += ["", "## All points", "",
-              "| row | groups | class | A | lambda_x | lambda_prog | CV A | CV lambda | cycles "
-              "| loops | crossings | R0 | wall s | error |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "| row | groups | class | A | lambda_x | lambda_prog | CV A | CV lambda "
+              "| settled CV A / lambda | cycles | loops | crossings | R0 | wall s | error |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in sorted(recs, key=lambda r: (r["row"], sorted(r["groups"].items()))):
         g = ", ".join(f"{k}={v:g}" for k, v in r["groups"].items()) or "baseline"
         lines.append(
             f"| {r['row']} | {g} | {r['pattern']} | {_fmt(r['amplitude'])} | "
             f"{_fmt(r['wavelength_x'])} | {_fmt(r['wavelength_prog'])} | "
-            f"{_fmt(r['amplitude_cv'], 2)} | {_fmt(r['wavelength_cv'], 2)} | {r['n_cycles']} | "
+            f"{_fmt(r['amplitude_cv'], 2)} | {_fmt(r['wavelength_cv'], 2)} | "
+            f"{_fmt(r.get('settled_amplitude_cv'), 2)} / "
+            f"{_fmt(r.get('settled_wavelength_cv'), 2)} | {r['n_cycles']} | "
             f"{r['n_loops']} | {r['n_self_crossings']} | {_fmt(r['coil_radius'], 2)} | "
             f"{r['wall_s']} | {r['error'] or ''} |"
         )

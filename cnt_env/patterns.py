@@ -162,9 +162,18 @@ class MeasureOptions:
         uturn_prominence: prominence (in z, L_vb) an extremum of z needs to be a
             U-turn.
         periodic_cv_max: a serpentine is periodic when the CVs of amplitude and
-            wavelength are both below this ...
-        periodic_min_cycles: ... over at least this many cycles (fewer cycles with
-            CVs below the bound: "too_short", periodicity cannot be confirmed).
+            wavelength over its settled part (``settled_fraction``) are both below
+            this ...
+        periodic_min_cycles: ... and it has at least this many cycles (fewer cycles
+            with CVs below the bound: "too_short", periodicity cannot be confirmed).
+        settled_fraction: the periodic / irregular decision takes the CVs over the
+            last this fraction of the measured half-cycles (amplitudes) and of each
+            side's U-turn spacings (wavelengths): the pattern the run settles into. A
+            start-up whose amplitude decays over several cycles is not irregularity
+            (at v̄ = 0.005-0.019 a cycle is 200-450 L_vb of trace, and a fixed
+            ``transient_length`` drops less than one). 1.0 judges the whole measured
+            trace. The reported ``amplitude_cv`` and ``wavelength_cv`` are always the
+            whole measured trace's.
         serpentine_coil_loop_density: a serpentine is a serpentine-coil when it has
             at least this many loops per cycle ...
         serpentine_coil_min_loops: ... and at least this many loops in all (one
@@ -207,6 +216,7 @@ class MeasureOptions:
     uturn_prominence: float = 3.0
     periodic_cv_max: float = 0.10
     periodic_min_cycles: int = 10
+    settled_fraction: float = 0.5
     serpentine_coil_loop_density: float = 0.2
     serpentine_coil_min_loops: int = 2
     min_judged_cycles: int = 3
@@ -227,6 +237,7 @@ class MeasureOptions:
         _check_float("uturn_prominence", self.uturn_prominence)
         _check_float("periodic_cv_max", self.periodic_cv_max)
         _check_int("periodic_min_cycles", self.periodic_min_cycles)
+        _check_float("settled_fraction", self.settled_fraction, upper=1.0)
         _check_float("serpentine_coil_loop_density", self.serpentine_coil_loop_density)
         _check_int("serpentine_coil_min_loops", self.serpentine_coil_min_loops)
         _check_int("min_judged_cycles", self.min_judged_cycles)
@@ -689,20 +700,23 @@ def _direction(
     return d / norm if norm > 0.0 else None
 
 
+def _last(values: FloatArray, fraction: float) -> FloatArray:
+    return values[values.size - math.ceil(fraction * values.size) :]
+
+
 def _serpentine(
-    m: _Measured, u: dict[str, Any], flow_direction: ArrayLike | None
+    m: _Measured, u: dict[str, Any], flow_direction: ArrayLike | None, settled: float = 1.0
 ) -> dict[str, Any]:
     idx, side = u["local_indices"], u["sides"]
     peak_to_peak = np.abs(np.diff(m.points[idx, 1]))
     amplitudes = 0.5 * peak_to_peak
     direction = _direction(m, flow_direction, u)
     if direction is None:
-        wavelengths = np.empty(0)
+        per_side = [np.empty(0), np.empty(0)]
     else:
         along = u["centres"] @ direction
-        wavelengths = np.concatenate(
-            [np.abs(np.diff(along[side > 0])), np.abs(np.diff(along[side < 0]))]
-        )
+        per_side = [np.abs(np.diff(along[side > 0])), np.abs(np.diff(along[side < 0]))]
+    wavelengths = np.concatenate(per_side)
     return {
         "amplitude": _median(amplitudes),
         "peak_to_peak": _median(peak_to_peak),
@@ -711,6 +725,8 @@ def _serpentine(
         "wavelength": _median(wavelengths),
         "wavelength_spread": _spread(wavelengths),
         "wavelength_cv": _cv(wavelengths),
+        "settled_amplitude_cv": _cv(_last(amplitudes, settled)),
+        "settled_wavelength_cv": _cv(np.concatenate([_last(w, settled) for w in per_side])),
         "n_uturns": int(idx.size),
         "n_cycles": max(0, (int(idx.size) - 1) // 2),
         "amplitudes": amplitudes,
@@ -734,12 +750,14 @@ def serpentine_measures(
     measured trace (end minus start).
 
     Returns ``amplitude``, ``amplitude_spread`` (p16, p84), ``amplitude_cv``, the
-    same three for ``wavelength``, ``n_uturns``, ``n_cycles`` and the samples
-    ``amplitudes``, ``wavelengths``. Values without samples are NaN.
+    same three for ``wavelength``, ``settled_amplitude_cv`` and ``settled_wavelength_cv``
+    (over the last ``options.settled_fraction`` of the samples), ``n_uturns``,
+    ``n_cycles`` and the samples ``amplitudes``, ``wavelengths``. Values without
+    samples are NaN.
     """
     options = _options(options)
     m = _prepare(trace, options)
-    return _serpentine(m, _uturns(m, options), flow_direction)
+    return _serpentine(m, _uturns(m, options), flow_direction, options.settled_fraction)
 
 
 # --------------------------------------------------------------------------- loops
@@ -975,9 +993,9 @@ def _pattern(
             return "serpentine-coil"
         if cycles < options.min_judged_cycles:
             return "too_short"
-        regular = (
-            serp["amplitude_cv"] < options.periodic_cv_max
-            and serp["wavelength_cv"] < options.periodic_cv_max
+        regular = (  # the settled pattern's spread (MeasureOptions.settled_fraction)
+            serp["settled_amplitude_cv"] < options.periodic_cv_max
+            and serp["settled_wavelength_cv"] < options.periodic_cv_max
         )
         if regular:
             return "periodic-serpentine" if cycles >= options.periodic_min_cycles else "too_short"
@@ -1005,7 +1023,9 @@ def measure(
     within ``coil_max_rel_residual`` cover less than ``coil_min_strict_coverage`` and
     the radius is the loose windows'), ``amplitude``,
     ``amplitude_spread``, ``amplitude_cv``, ``wavelength``, ``wavelength_spread``,
-    ``wavelength_cv``, ``wavelength_progression`` (same-side U-turn spacing along
+    ``wavelength_cv``, ``settled_amplitude_cv`` and ``settled_wavelength_cv`` (the CVs
+    over the last ``settled_fraction`` of the U-turns, which decide periodic against
+    irregular), ``wavelength_progression`` (same-side U-turn spacing along
     the trace's own direction of progression, ``progression_direction``; with the
     paper's frame, wavelength along x, it differs when the flow is oblique),
     ``n_cycles``, ``n_uturns``, ``n_loops``, ``n_loop_events``, ``loop_density``
@@ -1018,7 +1038,7 @@ def measure(
     m = _prepare(trace, options)
     coil = _coil(m, options)
     u = _uturns(m, options)
-    serp = _serpentine(m, u, flow_direction)
+    serp = _serpentine(m, u, flow_direction, options.settled_fraction)
     loops = _loops(m, options, u)
     rough = _median_vertex_turning(m)
     length = float(m.s[-1])
@@ -1049,6 +1069,8 @@ def measure(
         "wavelength": float(serp["wavelength"]),
         "wavelength_spread": [float(v) for v in serp["wavelength_spread"]],
         "wavelength_cv": float(serp["wavelength_cv"]),
+        "settled_amplitude_cv": float(serp["settled_amplitude_cv"]),
+        "settled_wavelength_cv": float(serp["settled_wavelength_cv"]),
         "wavelength_progression": float(prog["wavelength"]),
         "progression_direction": [float(v) for v in prog["direction"]],
         "n_cycles": int(serp["n_cycles"]),
@@ -1095,9 +1117,11 @@ def classify(
        event: a full turn of the tangent between U-turns, or a cluster of
        self-crossings; one stray loop is not a serpentine-coil); else ``"too_short"``
        below ``min_judged_cycles`` cycles; else ``"periodic-serpentine"`` if the CVs
-       of amplitude and wavelength are both below ``periodic_cv_max`` over at least
-       ``periodic_min_cycles`` cycles (``"too_short"`` with fewer: regular, but not
-       long enough to call periodic); else ``"irregular-serpentine"``.
+       of amplitude and wavelength over the settled part (the last
+       ``settled_fraction`` of the U-turns) are both below ``periodic_cv_max`` and it
+       has at least ``periodic_min_cycles`` cycles (``"too_short"`` with fewer:
+       regular, but not long enough to call periodic); else
+       ``"irregular-serpentine"`` (the spread persists after the start-up).
     5. ``"straight"``: no U-turns, no loops, chord / arc length >=
        ``STRAIGHT_MIN_CHORD_RATIO``.
     6. ``"unknown"`` otherwise. On the ``"flat"`` substrate the serpentine classes
