@@ -394,12 +394,7 @@ def run_point(
     opts = MeasureOptions(transient_length=transient)
     substrate = "flat" if cfg.params.kappa_c_bar is None else "stepped"
     m = measure(trace, opts, substrate, flow_direction=(1.0, 0.0))
-    m_prog = measure(trace, opts, substrate, flow_direction=None)
     p = cfg.params
-
-    def f(x: Any) -> Any:
-        return None if isinstance(x, float) and not math.isfinite(x) else x
-
     rec = {
         "key": point_key(point, candidate, dt_factor, seed),
         "row": point["row"],
@@ -434,6 +429,21 @@ def run_point(
         "deposit": length,
         "transient": transient,
         "error": error,
+        **_measured(m),
+        "wall_s": round(wall, 1),
+        "steps": sim.stats()["steps"],
+    }
+    return {"record": rec, "trace": np.asarray(trace[:, [0, 2]], dtype=np.float32)}
+
+
+def _measured(m: dict[str, Any]) -> dict[str, Any]:
+    """A point record's fields from ``patterns.measure`` (wavelength along x; NaN as
+    None): one home for what a run and a re-measure write."""
+
+    def f(x: Any) -> Any:
+        return None if isinstance(x, float) and not math.isfinite(x) else x
+
+    return {
         "pattern": m["pattern"],
         "coil_radius": f(m["coil_radius"]),
         "amplitude": f(m["amplitude"]),
@@ -442,15 +452,12 @@ def run_point(
         "wavelength_cv": f(m["wavelength_cv"]),
         "settled_amplitude_cv": f(m["settled_amplitude_cv"]),
         "settled_wavelength_cv": f(m["settled_wavelength_cv"]),
-        "wavelength_prog": f(m_prog["wavelength"]),
+        "wavelength_prog": f(m["wavelength_progression"]),
         "n_cycles": m["n_cycles"],
         "n_loops": m["n_loops"],
         "n_self_crossings": m["n_self_crossings"],
-        "loop_density": f(m.get("loop_density", math.nan)),
-        "wall_s": round(wall, 1),
-        "steps": sim.stats()["steps"],
+        "loop_density": f(m["loop_density"]),
     }
-    return {"record": rec, "trace": np.asarray(trace[:, [0, 2]], dtype=np.float32)}
 
 
 def remeasure(out: Path) -> int:
@@ -471,21 +478,7 @@ def remeasure(out: Path) -> int:
         trace = np.load(f).astype(np.float64)
         opts = MeasureOptions(transient_length=rec["transient"])
         sub = "flat" if rec["preset"] == COIL else "stepped"
-        m = measure(trace, opts, sub, flow_direction=(1.0, 0.0))
-
-        def f_(x: Any) -> Any:
-            return None if isinstance(x, float) and not math.isfinite(x) else x
-
-        rec.update(
-            pattern=m["pattern"], coil_radius=f_(m["coil_radius"]),
-            amplitude=f_(m["amplitude"]), amplitude_cv=f_(m["amplitude_cv"]),
-            wavelength_x=f_(m["wavelength"]), wavelength_cv=f_(m["wavelength_cv"]),
-            settled_amplitude_cv=f_(m["settled_amplitude_cv"]),
-            settled_wavelength_cv=f_(m["settled_wavelength_cv"]),
-            wavelength_prog=f_(m["wavelength_progression"]), n_cycles=m["n_cycles"],
-            n_loops=m["n_loops"], n_self_crossings=m["n_self_crossings"],
-            loop_density=f_(m["loop_density"]),
-        )  # fmt: skip
+        rec.update(_measured(measure(trace, opts, sub, flow_direction=(1.0, 0.0))))
         n += 1
     path.write_text("".join(json.dumps(r) + "\n" for r in recs))
     return n
