@@ -171,9 +171,11 @@ class MeasureOptions:
             side's U-turn spacings (wavelengths): the pattern the run settles into. A
             start-up whose amplitude decays over several cycles is not irregularity
             (at v̄ = 0.005-0.019 a cycle is 200-450 L_vb of trace, and a fixed
-            ``transient_length`` drops less than one). 1.0 judges the whole measured
-            trace. The reported ``amplitude_cv`` and ``wavelength_cv`` are always the
-            whole measured trace's.
+            ``transient_length`` drops less than one). The serpentine-coil rule counts
+            the loops of the same settled part: loops of the start-up alone do not make
+            a serpentine-coil. 1.0 judges the whole measured trace. The reported
+            ``amplitude_cv`` and ``wavelength_cv`` are always the whole measured
+            trace's.
         serpentine_coil_loop_density: a serpentine is a serpentine-coil when it has
             at least this many loops per cycle ...
         serpentine_coil_min_loops: ... and at least this many loops in all (one
@@ -725,6 +727,9 @@ def _serpentine(
         "wavelength": _median(wavelengths),
         "wavelength_spread": _spread(wavelengths),
         "wavelength_cv": _cv(wavelengths),
+        # the settled part starts at this U-turn (ordinal): its amplitudes are the last
+        # ``settled`` of them
+        "settled_uturn": amplitudes.size - _last(amplitudes, settled).size,
         "settled_amplitude_cv": _cv(_last(amplitudes, settled)),
         "settled_wavelength_cv": _cv(np.concatenate([_last(w, settled) for w in per_side])),
         "n_uturns": int(idx.size),
@@ -900,24 +905,32 @@ def self_crossings(
     return _crossing_pairs(_plane(trace), int(max_candidate_pairs))
 
 
-def _loops(m: _Measured, options: MeasureOptions, u: dict[str, Any]) -> dict[str, Any]:
+def _events(closing: FloatArray) -> int:
+    """Crossing events: crossing pairs whose later segments (where a loop closes, sorted
+    arc lengths ``closing``) lie within _CROSSING_EVENT_ARC of each other are one event (a
+    loop may cross itself and its neighbouring legs a few times)."""
+    return int(1 + np.count_nonzero(np.diff(closing) > _CROSSING_EVENT_ARC)) if closing.size else 0
+
+
+def _loops(
+    m: _Measured, options: MeasureOptions, u: dict[str, Any], settled_uturn: int = 0
+) -> dict[str, Any]:
     n = m.points.shape[0]
     bounds = np.unique(np.concatenate([[0], u["local_indices"], [n - 1]]))
     turning = np.diff(m.heading[bounds])
     per_interval = np.floor((np.abs(turning) + LOOP_TURNING_TOLERANCE) / (2.0 * math.pi))
     pairs, complete = _crossing_pairs(m.points, options.crossing_pair_budget)
     n_loops = int(per_interval.sum())
-    # crossing events: crossing pairs whose later segments (where a loop closes) lie
-    # within _CROSSING_EVENT_ARC of each other are one event (a loop may cross itself
-    # and its neighbouring legs a few times)
-    events = 0
-    if pairs.shape[0]:
-        closing = np.sort(m.s[pairs[:, 1]])
-        events = int(1 + np.count_nonzero(np.diff(closing) > _CROSSING_EVENT_ARC))
+    closing = np.sort(m.s[pairs[:, 1]])
+    # the settled part (MeasureOptions.settled_fraction): from its first U-turn on
+    start = int(u["local_indices"][settled_uturn]) if settled_uturn > 0 else 0
+    settled_loops = int(per_interval[bounds[:-1] >= start].sum())
+    settled_events = _events(closing[closing >= m.s[start]])
     return {
         "has_loops": bool(n_loops > 0 or pairs.shape[0] > 0),
         "n_loops": n_loops,
-        "n_loop_events": max(n_loops, events),
+        "n_loop_events": max(n_loops, _events(closing)),
+        "settled_loop_events": max(settled_loops, settled_events),
         "n_self_crossings": int(pairs.shape[0]),
         "self_crossings_complete": bool(complete),
         "interval_turning": turning,
@@ -986,9 +999,11 @@ def _pattern(
             return "coil"
     if substrate == "stepped" and serp["n_uturns"] >= 2:
         cycles = serp["n_cycles"]
-        events = loops["n_loop_events"]
+        # loops of the settled pattern: a start-up's loops do not make a serpentine-coil
+        events = loops["settled_loop_events"]
+        settled_cycles = max(0, (serp["n_uturns"] - serp["settled_uturn"] - 1) // 2)
         if events >= options.serpentine_coil_min_loops and (
-            events >= options.serpentine_coil_loop_density * max(cycles, 1)
+            events >= options.serpentine_coil_loop_density * max(settled_cycles, 1)
         ):
             return "serpentine-coil"
         if cycles < options.min_judged_cycles:
@@ -1025,7 +1040,8 @@ def measure(
     ``amplitude_spread``, ``amplitude_cv``, ``wavelength``, ``wavelength_spread``,
     ``wavelength_cv``, ``settled_amplitude_cv`` and ``settled_wavelength_cv`` (the CVs
     over the last ``settled_fraction`` of the U-turns, which decide periodic against
-    irregular), ``wavelength_progression`` (same-side U-turn spacing along
+    irregular), ``settled_loop_events`` (the loop events of that part, which decide
+    serpentine-coil), ``wavelength_progression`` (same-side U-turn spacing along
     the trace's own direction of progression, ``progression_direction``; with the
     paper's frame, wavelength along x, it differs when the flow is oblique),
     ``n_cycles``, ``n_uturns``, ``n_loops``, ``n_loop_events``, ``loop_density``
@@ -1039,7 +1055,7 @@ def measure(
     coil = _coil(m, options)
     u = _uturns(m, options)
     serp = _serpentine(m, u, flow_direction, options.settled_fraction)
-    loops = _loops(m, options, u)
+    loops = _loops(m, options, u, serp["settled_uturn"])
     rough = _median_vertex_turning(m)
     length = float(m.s[-1])
     chord = float(np.hypot(*(m.points[-1] - m.points[0])))
@@ -1078,6 +1094,7 @@ def measure(
         "n_loops": int(loops["n_loops"]),
         "n_loop_events": int(loops["n_loop_events"]),
         "loop_density": float(loops["n_loop_events"]) / cycles,
+        "settled_loop_events": int(loops["settled_loop_events"]),
         "n_self_crossings": int(loops["n_self_crossings"]),
         "self_crossings_complete": bool(loops["self_crossings_complete"]),
         "median_vertex_turning": rough,
@@ -1112,10 +1129,11 @@ def classify(
        whose caps may fit one big circle loosely (a serpentine of the Ī = 30 sweep point
        did, radius 49 against its amplitude 32).
     4. On the ``"stepped"`` substrate, with at least two U-turns:
-       ``"serpentine-coil"`` if it has at least ``serpentine_coil_min_loops`` loop
-       events and at least ``serpentine_coil_loop_density`` of them per cycle (a loop
-       event: a full turn of the tangent between U-turns, or a cluster of
-       self-crossings; one stray loop is not a serpentine-coil); else ``"too_short"``
+       ``"serpentine-coil"`` if its settled part (the last ``settled_fraction`` of
+       the U-turns) has at least ``serpentine_coil_min_loops`` loop events and at
+       least ``serpentine_coil_loop_density`` of them per cycle (a loop event: a full
+       turn of the tangent between U-turns, or a cluster of self-crossings; one stray
+       loop, or loops of the start-up alone, do not make a serpentine-coil); else ``"too_short"``
        below ``min_judged_cycles`` cycles; else ``"periodic-serpentine"`` if the CVs
        of amplitude and wavelength over the settled part (the last
        ``settled_fraction`` of the U-turns) are both below ``periodic_cv_max`` and it

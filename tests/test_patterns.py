@@ -713,3 +713,27 @@ def test_real_start_up_against_real_irregularity() -> None:
     assert result["settled_amplitude_cv"] > 0.2
     assert result["pattern"] == "irregular-serpentine"
     assert measure(irregular, whole, "stepped")["pattern"] == "irregular-serpentine"
+
+
+def test_loops_of_the_start_up_alone_do_not_make_a_serpentine_coil() -> None:
+    """The serpentine-coil rule counts the loops of the settled part too: loops in the
+    first cycles only (a start-up) leave a periodic serpentine; the same loops in the
+    last cycles make a serpentine-coil; judged over the whole trace (settled_fraction
+    1.0) both are serpentine-coils."""
+    runs = [2 * A_BAR - LAMBDA_BAR / 2] * 44
+    early = serpentine_curve(runs[:12], LAMBDA_BAR, 0.5, loop_every=1)
+    late = serpentine_curve(runs[:32], LAMBDA_BAR, 0.5)
+    clean = serpentine_curve(runs[:32], LAMBDA_BAR, 0.5)
+    looped = serpentine_curve(runs[:12], LAMBDA_BAR, 0.5, loop_every=1)
+    # each piece ends going down at z = 0 and the next starts going up there: join them
+    # by a flat cap lambda / 2 wide along x
+    cap = np.array([LAMBDA_BAR / 2, 0.0])
+    start_up = np.vstack([early, clean + (early[-1] - clean[0] + cap)])
+    ending = np.vstack([late, looped + (late[-1] - looped[0] + cap)])
+    whole = MeasureOptions(settled_fraction=1.0)
+    result = measure(start_up, substrate="stepped")
+    assert result["n_loop_events"] >= 4 and result["settled_loop_events"] == 0
+    assert result["pattern"] == "periodic-serpentine"
+    assert measure(start_up, whole, "stepped")["pattern"] == "serpentine-coil"
+    assert measure(ending, substrate="stepped")["pattern"] == "serpentine-coil"
+    assert measure(ending, whole, "stepped")["pattern"] == "serpentine-coil"
