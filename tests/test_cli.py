@@ -456,3 +456,23 @@ def test_run_config_file_round_trips_and_flags_win(tmp_path: Path) -> None:
     assert code == 2 and "vbarr" in err and "unknown settings" in err
     code, _, err = _call(["run", "--config", str(tmp_path / "missing.yaml")])
     assert code == 2 and "cannot read" in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["sweep", "--Hbar=30", "--deposit=3", "--no-plots", "--param=--", "--range=", "--out=x"],
+        ["run", "--preset=--"],
+        ["run", "--kappa-c=--", "--deposit=3"],
+    ],
+)
+def test_an_option_given_double_dash_as_its_value_is_a_usage_error(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """argparse reads ``--opt=--`` as the end of options and stores [] (found by the slow
+    CLI fuzz: ``sweep --param=--`` crashed with an AttributeError). No work is done."""
+    assert cli.main(argv) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    flag = next(a for a in argv if a.endswith("=--")).split("=")[0]
+    assert f"{flag} got '--' as its value" in err
+    assert "unexpected" not in err

@@ -404,7 +404,8 @@ def _fuzz_sweep(data: st.DataObject) -> None:
     else:
         out = root / "new.csv"
     argv.append(f"--out={out}")
-    # bounded sweep size: the fuzz never asks for more than --max-points' default
+    # bounded sweep size: a drawn --max-points (up to 1e9) is refused over
+    # sweep.MAX_POINTS_CEILING before any grid is built
     _run_example(argv, root)
 
 

@@ -290,6 +290,11 @@ def _clean(code: int, stdout: str, stderr: str, expected: int, *names: str) -> N
         (["--param", "Ibar", "--values", "1", "--repeats", "100000000"], ["--max-points"]),
         (["--param", "Ibar", "--range", "1:2:100000000"], ["--range", "--max-points"]),
         (["--param", "Ibar", "--values", "1,2", "--max-points", "1"], ["--max-points"]),
+        # a raised limit has a ceiling: 1e9 points of a range took 24 GB before the check
+        (
+            ["--param", "Ibar", "--range", "1:2:1000000000", "--max-points", "1000000000"],
+            ["--max-points", "ceiling"],
+        ),
         (["--param", "Ibar", "--values", "100", "--kappa-c", "0"], ["--kappa-c"]),
         (["--param", "kappa-c", "--values", "0"], ["--kappa-c"]),
         (["--param", "Ibar", "--values", "1e300"], ["--Ibar", "meaningful range"]),

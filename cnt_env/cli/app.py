@@ -211,6 +211,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _error(str(exc), exc.code)
         except SystemExit as exc:
             return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    # argparse reads "--opt=--" as the end of options and stores [] for it (no option of
+    # this CLI takes a list): a usage error, not a crash inside the command
+    if any(isinstance(v, list) for v in vars(args).values()):
+        flags = [a.split("=", 1)[0] for a in argv if a.startswith("-") and a.endswith("=--")]
+        flag = flags[0] if flags else "an option"
+        return _error(f"{flag} got '--' as its value; give the value itself", EXIT_USAGE)
     args.argv = argv
     from cnt_env.sim.stepper import SimulationError
     from cnt_env.sweep import SweepFailure

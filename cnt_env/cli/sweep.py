@@ -27,7 +27,14 @@ from cnt_env.cli.common import (
     warn,
 )
 from cnt_env.io import OutputSet, config_json_text
-from cnt_env.sweep import BACKENDS, DEFAULT_OUT, MAX_POINTS, SweepPoint, row_class
+from cnt_env.sweep import (
+    BACKENDS,
+    DEFAULT_OUT,
+    MAX_POINTS,
+    MAX_POINTS_CEILING,
+    SweepPoint,
+    row_class,
+)
 
 
 def _float(value: Any) -> float:
@@ -238,7 +245,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         type=int,
         default=MAX_POINTS,
         metavar="N",
-        help=f"sweep size limit: grid points x repeats (default {MAX_POINTS})",
+        help=f"sweep size limit: grid points x repeats (default {MAX_POINTS}; at most "
+        f"{MAX_POINTS_CEILING})",
     )
     add_limit_arguments(p.add_argument_group("limits of each run (docs/cli.md)"))
 

@@ -49,6 +49,11 @@ DEFAULT_OUT = "sweep.csv"
 BACKENDS = ("local", "ray")
 #: Default of the sweep-size limit (``--max-points``): grid points times repeats.
 MAX_POINTS = 10_000
+#: Highest --max-points accepted: an axis is built in memory up to the limit before the
+#: grid's size is checked (a --range of 1e9 points under --max-points 1e9, drawn by the
+#: slow CLI fuzz, grew to 24 GB), and a million runs of seconds to minutes each is
+#: beyond any sweep this tool makes.
+MAX_POINTS_CEILING = 1_000_000
 
 InputError = runs.RunInputError
 
@@ -251,6 +256,10 @@ def _check_int(flag: str, value: Any, low: int) -> None:
 def resolve_sweep(opts: SweepOptions, warn: Any = None) -> SweepPlan:
     """Validate every input and every point of a sweep; raises RunInputError."""
     _check_int("--max-points", opts.max_points, 1)
+    if opts.max_points > MAX_POINTS_CEILING:
+        raise InputError(
+            f"--max-points {opts.max_points} is over the ceiling of {MAX_POINTS_CEILING} runs"
+        )
     axes = [a for a in (ax.resolve(opts.max_points) for ax in opts.axes) if a is not None]
     if not axes:
         raise InputError("give the swept parameter: --param NAME --values a,b,...")
