@@ -726,3 +726,25 @@ def test_the_finetune_config_acts_on_the_shipped_agents_own_base() -> None:
     assert record["path"] == str(shipped) and len(record["sha256"]) == 64
     with pytest.raises(ValueError, match="residual settings"):
         check_trained_agent(shipped, "ppo", load_config(CONFIG_DIR / "ppo_residual_calibrated.yml"))
+
+
+@pytest.mark.parametrize(
+    ("module", "argv", "flag"),
+    [
+        ("training.evaluate", ["--policies=--"], "--policies"),
+        ("training.evaluate", ["--reuse", "--seeds=--"], "--seeds"),  # [] of --reuse is fine
+        ("training.train", ["--algo=--"], "--algo"),
+        ("training.demo", ["--out=--"], "--out"),
+    ],
+)
+def test_an_option_given_double_dash_is_a_usage_error(
+    module: str, argv: list[str], flag: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """argparse stores [] for ``--opt=--``; the training CLIs stop with a usage error
+    (exit 2) naming the option, before any work, instead of a traceback further on."""
+    import importlib
+
+    with pytest.raises(SystemExit) as exc:
+        importlib.import_module(module).main(argv)
+    assert exc.value.code == 2
+    assert f"{flag} got '--' as its value" in capsys.readouterr().err

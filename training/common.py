@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import argparse
 import copy
 import os
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -282,3 +284,19 @@ class HeldOutCycle(gym.Wrapper):
         if target == VALIDATION:
             return self.env.reset(seed=VALIDATION_SEED0 + i)
         return self.env.reset(seed=seed, options={"target": target})
+
+
+def parse_cli(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """``parser.parse_args(argv)`` with ``--opt=--`` a usage error (exit 2): argparse reads
+    ``--`` as the end of options and stores [] for a single-valued option, which crashed
+    further on (cnt-sim had the same defect: cnt_env/cli/app.py)."""
+    args = parser.parse_args(argv)
+    if any(
+        isinstance(v, list) and not isinstance(parser.get_default(k), list)
+        for k, v in vars(args).items()
+    ):
+        given = list(sys.argv[1:] if argv is None else argv)
+        flags = [a.split("=", 1)[0] for a in given if a.startswith("-") and a.endswith("=--")]
+        parser.error(f"{flags[0] if flags else 'an option'} got '--' as its value; "
+                     "give the value itself")  # fmt: skip
+    return args

@@ -27,7 +27,7 @@ import sys
 import time
 from pathlib import Path
 
-from .common import CHECKPOINT_CALLBACK, CONFIG_DIR, EVAL_CALLBACK, load_config
+from .common import CHECKPOINT_CALLBACK, CONFIG_DIR, EVAL_CALLBACK, load_config, parse_cli
 from .evaluate import PRETRAINED, evaluate
 from .train import train
 
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=2, help="worker processes")
     p.add_argument("--no-train", action="store_true", help="skip the short training run")
     p.add_argument("--no-rrd", action="store_true", help="skip the rerun recordings")
-    args = p.parse_args(argv)
+    args = parse_cli(p, argv)
     t0 = time.perf_counter()
     budget = 60.0 * args.budget_minutes
     targets = [t for t in args.targets.split(",") if t]

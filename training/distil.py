@@ -337,7 +337,9 @@ def main(argv: list[str] | None = None) -> int:
         metavar="N",
         help="score the fitted agent and the follower on N validation routes",
     )
-    args = ap.parse_args(argv)
+    from .common import parse_cli
+
+    args = parse_cli(ap, argv)
     t0 = time.perf_counter()
     if not args.fit_only:
         families = [f for f in args.families.split(",") if f]

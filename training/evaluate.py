@@ -71,6 +71,7 @@ from .common import (
     limit_threads,
     load_config,
     make_env,
+    parse_cli,
     score_mode,
 )
 
@@ -789,7 +790,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = parse_cli(build_parser(), argv)
     config = load_config(args.config)
     env_kwargs, _ = env_settings(config)
     names = held_out_names(env_kwargs)

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from training.callbacks import policy_kwargs
-from training.common import CONFIG_DIR, ENV_ID, env_settings, load_config
+from training.common import CONFIG_DIR, ENV_ID, env_settings, load_config, parse_cli
 
 __all__ = ["RLlibPolicy", "build_config", "main", "train_rllib"]
 
@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--out", type=Path, default=None, help="run directory (default: runs/rllib/<time>)"
     )
-    args = ap.parse_args(argv)
+    args = parse_cli(ap, argv)
     if args.env_runners < 0 or args.envs_per_runner < 1 or args.timesteps < 1:
         ap.error("--env-runners >= 0, --envs-per-runner >= 1 and --timesteps >= 1 are required")
     out = args.out or Path("runs") / "rllib" / time.strftime("%Y%m%d-%H%M%S")

@@ -79,6 +79,7 @@ from .common import (
     load_config,
     make_env,
     normalize_settings,
+    parse_cli,
     score_mode,
 )
 
@@ -425,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_cli(parser, argv)
     if args.new_base_options and args.trained_agent is None:
         parser.error(
             "--new-base-options changes the base of a trained agent: give the "
