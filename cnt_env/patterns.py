@@ -719,6 +719,9 @@ def _serpentine(
         along = u["centres"] @ direction
         per_side = [np.abs(np.diff(along[side > 0])), np.abs(np.diff(along[side < 0]))]
     wavelengths = np.concatenate(per_side)
+    settled_amplitudes = _last(amplitudes, settled)
+    # the settled part starts at this U-turn (ordinal)
+    settled_uturn = amplitudes.size - settled_amplitudes.size
     return {
         "amplitude": _median(amplitudes),
         "peak_to_peak": _median(peak_to_peak),
@@ -727,13 +730,12 @@ def _serpentine(
         "wavelength": _median(wavelengths),
         "wavelength_spread": _spread(wavelengths),
         "wavelength_cv": _cv(wavelengths),
-        # the settled part starts at this U-turn (ordinal): its amplitudes are the last
-        # ``settled`` of them
-        "settled_uturn": amplitudes.size - _last(amplitudes, settled).size,
-        "settled_amplitude_cv": _cv(_last(amplitudes, settled)),
+        "settled_uturn": settled_uturn,
+        "settled_amplitude_cv": _cv(settled_amplitudes),
         "settled_wavelength_cv": _cv(np.concatenate([_last(w, settled) for w in per_side])),
         "n_uturns": int(idx.size),
         "n_cycles": max(0, (int(idx.size) - 1) // 2),
+        "settled_cycles": max(0, (int(idx.size) - settled_uturn - 1) // 2),
         "amplitudes": amplitudes,
         "wavelengths": wavelengths,
         "direction": (math.nan, math.nan) if direction is None else tuple(map(float, direction)),
@@ -1001,9 +1003,8 @@ def _pattern(
         cycles = serp["n_cycles"]
         # loops of the settled pattern: a start-up's loops do not make a serpentine-coil
         events = loops["settled_loop_events"]
-        settled_cycles = max(0, (serp["n_uturns"] - serp["settled_uturn"] - 1) // 2)
         if events >= options.serpentine_coil_min_loops and (
-            events >= options.serpentine_coil_loop_density * max(settled_cycles, 1)
+            events >= options.serpentine_coil_loop_density * max(serp["settled_cycles"], 1)
         ):
             return "serpentine-coil"
         if cycles < options.min_judged_cycles:

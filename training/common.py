@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
+from cnt_env.cli.common import double_dash_option
 from cnt_env.task import routes, settings
 from cnt_env.task import targets as targets_mod
 from policies.residual import (
@@ -289,14 +290,9 @@ class HeldOutCycle(gym.Wrapper):
 def parse_cli(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
     """``parser.parse_args(argv)`` with ``--opt=--`` a usage error (exit 2): argparse reads
     ``--`` as the end of options and stores [] for a single-valued option, which crashed
-    further on (cnt-sim had the same defect: cnt_env/cli/app.py)."""
+    further on (cnt_env.cli.common.double_dash_option)."""
     args = parser.parse_args(argv)
-    if any(
-        isinstance(v, list) and not isinstance(parser.get_default(k), list)
-        for k, v in vars(args).items()
-    ):
-        given = list(sys.argv[1:] if argv is None else argv)
-        flags = [a.split("=", 1)[0] for a in given if a.startswith("-") and a.endswith("=--")]
-        parser.error(f"{flags[0] if flags else 'an option'} got '--' as its value; "
-                     "give the value itself")  # fmt: skip
+    flag = double_dash_option(parser, args, list(sys.argv[1:] if argv is None else argv))
+    if flag is not None:
+        parser.error(f"{flag} got '--' as its value; give the value itself")
     return args

@@ -33,6 +33,7 @@ from cnt_env.cli.common import (
     EXIT_USAGE,
     PROG,
     CliError,
+    double_dash_option,
     package_version,
     print_json,
     require_rerun,
@@ -211,11 +212,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _error(str(exc), exc.code)
         except SystemExit as exc:
             return exc.code if isinstance(exc.code, int) else EXIT_USAGE
-    # argparse reads "--opt=--" as the end of options and stores [] for it (no option of
-    # this CLI takes a list): a usage error, not a crash inside the command
-    if any(isinstance(v, list) for v in vars(args).values()):
-        flags = [a.split("=", 1)[0] for a in argv if a.startswith("-") and a.endswith("=--")]
-        flag = flags[0] if flags else "an option"
+    flag = double_dash_option(parser, args, argv)  # "--opt=--": a usage error, not a crash
+    if flag is not None:
         return _error(f"{flag} got '--' as its value; give the value itself", EXIT_USAGE)
     args.argv = argv
     from cnt_env.sim.stepper import SimulationError

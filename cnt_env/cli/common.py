@@ -25,11 +25,12 @@ the flag or the input file concerned.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any
 
@@ -94,6 +95,23 @@ def require_rerun() -> None:
         import_rerun()
     except ImportError as exc:
         raise CliError(str(exc), EXIT_FAILED) from exc
+
+
+def double_dash_option(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, argv: Sequence[str]
+) -> str | None:
+    """The option given ``--`` as its value (``--opt=--``), else None. argparse reads
+    ``--`` as the end of options and stores [] for a single-valued option, which crashes
+    further on; an option whose default is a list (``nargs="*"``) may be [] by right.
+    Shared by cnt-sim (``app.main``) and the training CLIs (``training.common.parse_cli``).
+    """
+    if not any(
+        isinstance(v, list) and not isinstance(parser.get_default(k), list)
+        for k, v in vars(args).items()
+    ):
+        return None
+    flags = [a.split("=", 1)[0] for a in argv if a.startswith("-") and a.endswith("=--")]
+    return flags[0] if flags else "an option"
 
 
 def warn(message: str) -> None:
