@@ -748,3 +748,53 @@ def test_an_option_given_double_dash_is_a_usage_error(
         importlib.import_module(module).main(argv)
     assert exc.value.code == 2
     assert f"{flag} got '--' as its value" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("module", "argv", "message"),
+    [
+        ("training.train", ["--algo", "ppo", "--n-timesteps", "0"], "--n-timesteps: must be"),
+        ("training.train", ["--algo", "ppo", "--n-envs", "-1"], "--n-envs: must be"),
+        ("training.train", ["--algo", "sac", "--max-episode-steps", "0"], "--max-episode-steps"),
+        ("training.train", ["--algo", "ppo", "--max-wall-seconds", "nan"], "finite number > 0"),
+        ("training.train", ["--algo", "ppo", "--seed", "-3"], "a seed must be ≥ 0"),
+        ("training.train", ["--algo", "ppo", "--config", "{tmp}/missing.yml"], "cannot read"),
+        ("training.train", ["--algo", "ppo", "--config", "{tmp}/bad.yml"], "not valid YAML"),
+        ("training.train", ["--algo", "ppo", "--config", "{tmp}/list.yml"], "has no entry"),
+        ("training.train", ["--algo", "ppo", "--config", "{tmp}/zero.yml"], "n_timesteps must"),
+        ("training.train", ["--algo", "ppo", "--trained-agent", "{tmp}/bad.zip"], "not valid YAML"),
+        ("training.train", ["--algo", "ppo", "--trained-agent", "{tmp}/no.zip"], "no model at"),
+        ("training.evaluate", ["--seeds", "0,-1"], "--seeds: a seed must be ≥ 0"),
+        ("training.evaluate", ["--seeds", ","], "--seeds: give at least one seed"),
+        ("training.evaluate", ["--targets", "u_turn,nosuch"], "['nosuch']: not held-out"),
+        ("training.demo", ["--targets", "nosuch"], "--targets: ['nosuch']: not held-out"),
+        ("training.demo", ["--seeds", "-1"], "--seeds: a seed must be ≥ 0"),
+        ("training.demo", ["--budget-minutes", "-1"], "finite number > 0"),
+        ("training.demo", ["--jobs", "0"], "--jobs: must be a positive integer"),
+        ("training.evaluate", ["--jobs", "0"], "--jobs: must be a positive integer"),
+        ("training.evaluate", ["--config", "{tmp}/bad.yml"], "--config: the config"),
+    ],
+)
+def test_bad_training_input_is_a_usage_error_that_makes_nothing(
+    module: str, argv: list[str], message: str, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """A bad number, a missing or corrupt config, or a corrupt --trained-agent stops
+    cnt-train / cnt-evaluate / cnt-demo with a usage error (exit 2) that says what is wrong, before
+    any run directory or results directory is made (found by hand-fuzzing both CLIs:
+    before, tracebacks from a worker process, a 0-step 'run' for --n-timesteps -5)."""
+    import importlib
+
+    (tmp_path / "bad.yml").write_text("garbage: [\n")
+    (tmp_path / "bad.zip").write_bytes(b"not a zip")  # its .yml is bad.yml
+    (tmp_path / "list.yml").write_text("- a\n")
+    (tmp_path / "zero.yml").write_text("CNTDeposit-v0: {n_timesteps: 0}\n")
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        importlib.import_module(module).main([*argv, "--out", str(work / "out")])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+    assert list(work.iterdir()) == []  # no run or results directory, no runs/ default

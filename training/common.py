@@ -35,16 +35,22 @@ __all__ = [
     "algo_kwargs",
     "callback_settings",
     "check_callbacks",
+    "check_run_config",
     "curriculum_settings",
     "env_settings",
     "eval_settings",
     "fresh_dir",
     "held_out_names",
+    "held_out_targets",
     "limit_threads",
     "load_config",
     "make_env",
     "normalize_settings",
+    "positive_float",
+    "positive_int",
     "score_mode",
+    "seed_int",
+    "seed_list",
 ]
 
 ENV_ID = "CNTDeposit-v0"
@@ -77,12 +83,75 @@ def limit_threads() -> None:
 
 
 def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
-    """The entry ``env_id`` of an rl-zoo style YAML file (a deep copy)."""
-    with Path(path).open() as fh:
-        data = yaml.safe_load(fh)
-    if env_id not in data:
-        raise ValueError(f"{path} has no entry {env_id!r}; it has {sorted(data)}")
+    """The entry ``env_id`` of an rl-zoo style YAML file (a deep copy). A file that cannot
+    be read, is not YAML or has no such mapping raises ValueError naming the file."""
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise ValueError(f"cannot read the config {path}: {exc.strerror or exc}") from exc
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"the config {path} is not valid YAML ({first})") from exc
+    if not isinstance(data, dict) or env_id not in data:
+        has = sorted(map(str, data)) if isinstance(data, dict) else type(data).__name__
+        raise ValueError(f"{path} has no entry {env_id!r} (rl-zoo style); it has {has}")
+    if not isinstance(data[env_id], dict):
+        raise ValueError(f"{path}: the entry {env_id!r} must be a mapping of settings")
     return copy.deepcopy(data[env_id])
+
+
+def check_run_config(config: dict[str, Any]) -> None:
+    """Refuse a config whose run cannot start: ``n_timesteps`` and ``n_envs`` positive
+    integers, and an episode cap (``env_kwargs.max_episode_steps``) of at least 1."""
+    _, steps = env_settings(config)
+    for key, value in (("n_timesteps", config.get("n_timesteps")),
+                       ("n_envs", config.get("n_envs", 2)),
+                       ("max_episode_steps", steps)):  # fmt: skip
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{key} must be a positive integer, got {value!r}")
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer ≥ 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def seed_int(text: str) -> int:
+    """argparse type: a seed, an integer ≥ 0 (gymnasium and numpy refuse negative seeds)."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed must be ≥ 0, got {text}")
+    return value
+
+
+def seed_list(text: str) -> list[int]:
+    """argparse type: comma-separated episode seeds (each ≥ 0), at least one."""
+    seeds = [seed_int(x.strip()) for x in text.split(",") if x.strip()]
+    if not seeds:
+        raise argparse.ArgumentTypeError("give at least one seed")
+    return seeds
+
+
+def held_out_targets(text: str, names: Sequence[str]) -> list[str]:
+    """The held-out targets ``text`` names (comma separated, or ``all``: every one of
+    ``names``); ValueError naming any that is not one of ``names``."""
+    targets = list(names) if text == "all" else [x.strip() for x in text.split(",") if x.strip()]
+    unknown = [t for t in targets if t not in names]
+    if unknown or not targets:
+        raise ValueError(f"{unknown or 'none given'}: not held-out targets of this task; "
+                         f"choose from {list(names)} or all")  # fmt: skip
+    return targets
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (a time, a budget)."""
+    value = float(text)
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
 
 
 def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:

@@ -27,7 +27,19 @@ import sys
 import time
 from pathlib import Path
 
-from .common import CHECKPOINT_CALLBACK, CONFIG_DIR, EVAL_CALLBACK, load_config, parse_cli
+from .common import (
+    CHECKPOINT_CALLBACK,
+    CONFIG_DIR,
+    EVAL_CALLBACK,
+    env_settings,
+    held_out_names,
+    held_out_targets,
+    load_config,
+    parse_cli,
+    positive_float,
+    positive_int,
+    seed_list,
+)
 from .evaluate import PRETRAINED, evaluate
 from .train import train
 
@@ -45,19 +57,24 @@ TRAIN_SHARE = 0.25
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="cnt-demo", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
-    p.add_argument("--budget-minutes", type=float, default=8.0,
+    p.add_argument("--budget-minutes", type=positive_float, default=8.0,
                    help="wall-time budget; the short training run gets a quarter")  # fmt: skip
     p.add_argument("--targets", default="u_turn,l_up", help="held-out routes, comma separated")
-    p.add_argument("--seeds", default="0,1,2", help="episode seeds, comma separated")
+    p.add_argument("--seeds", type=seed_list, default="0,1,2",
+                   help="episode seeds, comma separated")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("runs/demo"), help="output folder")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--jobs", type=positive_int, default=2, help="worker processes")
     p.add_argument("--no-train", action="store_true", help="skip the short training run")
     p.add_argument("--no-rrd", action="store_true", help="skip the rerun recordings")
     args = parse_cli(p, argv)
     t0 = time.perf_counter()
     budget = 60.0 * args.budget_minutes
-    targets = [t for t in args.targets.split(",") if t]
-    seeds = [int(s) for s in args.seeds.split(",") if s]
+    eval_config = load_config(CONFIG_DIR / DEMO_EVAL_CONFIG)
+    try:
+        targets = held_out_targets(args.targets, held_out_names(env_settings(eval_config)[0]))
+    except ValueError as exc:
+        p.error(f"--targets: {exc}")
+    seeds = args.seeds
     config = load_config(CONFIG_DIR / DEMO_CONFIG)
     runs = []
     if not args.no_train:
@@ -78,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         policies,
         targets,
         seeds,
-        load_config(CONFIG_DIR / DEMO_EVAL_CONFIG),
+        eval_config,
         args.out / "results",
         models=PRETRAINED,
         runs=runs,

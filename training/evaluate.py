@@ -68,11 +68,14 @@ from .common import (
     eval_settings,
     fresh_dir,
     held_out_names,
+    held_out_targets,
     limit_threads,
     load_config,
     make_env,
     parse_cli,
+    positive_int,
     score_mode,
+    seed_list,
 )
 
 __all__ = ["ALL_POLICIES", "evaluate", "main"]
@@ -753,7 +756,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--targets", default="all",
                    help="held-out names (routes, or thin targets with score: thin), comma "
                         "separated, or all")  # fmt: skip
-    p.add_argument("--seeds", default="0,1,2", help="comma separated episode seeds")
+    p.add_argument("--seeds", type=seed_list, default="0,1,2",
+                   help="comma separated episode seeds")  # fmt: skip
     p.add_argument("--config", type=Path, default=CONFIG_DIR / "eval.yml",
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
     p.add_argument("--models", type=Path, default=PRETRAINED,
@@ -771,7 +775,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=None,
                    help="results directory (default: a new runs/evaluate/<task>, never "
                         "the committed training/results unless given)")  # fmt: skip
-    p.add_argument("--jobs", type=int, default=2, help="worker processes")
+    p.add_argument("--jobs", type=positive_int, default=2, help="worker processes")
     p.add_argument("--save-episodes", type=Path, default=None,
                    help="save every episode (cnt_env.replay episode npz) here")  # fmt: skip
     p.add_argument("--rrd", type=Path, default=None, help="write rerun recordings here")
@@ -790,14 +794,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parse_cli(build_parser(), argv)
-    config = load_config(args.config)
-    env_kwargs, _ = env_settings(config)
-    names = held_out_names(env_kwargs)
-    targets = list(names) if args.targets == "all" else _csv_list(args.targets)
-    seeds = [int(s) for s in _csv_list(args.seeds)]
-    if len(seeds) < 1:
-        raise SystemExit("--seeds: give at least one seed")
+    parser = build_parser()
+    args = parse_cli(parser, argv)
+    try:
+        config = load_config(args.config)
+        env_kwargs, _ = env_settings(config)
+    except ValueError as exc:
+        parser.error(f"--config: {exc}")
+    try:
+        targets = held_out_targets(args.targets, held_out_names(env_kwargs))
+    except ValueError as exc:
+        parser.error(f"--targets: {exc}")
+    seeds = args.seeds
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
     print(f"results -> {out}")
     from policies.sb3 import UntrustedModelError

@@ -71,6 +71,7 @@ from .common import (
     ResidualAction,
     algo_kwargs,
     check_callbacks,
+    check_run_config,
     curriculum_settings,
     env_settings,
     eval_settings,
@@ -80,7 +81,10 @@ from .common import (
     make_env,
     normalize_settings,
     parse_cli,
+    positive_float,
+    positive_int,
     score_mode,
+    seed_int,
 )
 
 __all__ = ["main", "train"]
@@ -173,6 +177,7 @@ def train(
     algo = algo.lower()
     cls = {"ppo": PPO, "sac": SAC}[algo]
     env_kwargs, max_steps = env_settings(config)
+    check_run_config(config)
     check_callbacks(config)  # the callbacks, checked before any env is built
     stages = curriculum_settings(config)
     earlier = (None if trained_agent is None
@@ -333,7 +338,14 @@ def check_trained_agent(
     SB3 when it loads. Returns the record of the agent's earlier run (path, sha256, its
     ``run``)."""
     path = Path(path)
-    resolved = model_config(path)  # yaml.safe_load
+    try:
+        resolved = model_config(path)  # yaml.safe_load
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path.with_suffix('.yml')}, the resolved config beside the "
+                         "model, is not valid YAML: restore it from the run directory "
+                         "the model came from") from exc  # fmt: skip
+    if not isinstance(resolved, dict):
+        raise ValueError(f"{path.with_suffix('.yml')} is not a resolved config (a mapping)")
     run = resolved.get("run")
     trained_algo = run.get("algo") if isinstance(run, dict) else None
     if trained_algo not in (None, algo):
@@ -403,12 +415,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--algo", choices=("ppo", "sac"), required=True, help="algorithm")
     p.add_argument("--config", type=Path, default=None,
                    help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=0, help="seed of the model and the envs")
-    p.add_argument("--n-timesteps", type=int, default=None, help="override n_timesteps")
-    p.add_argument("--n-envs", type=int, default=None, help="override n_envs")
-    p.add_argument("--max-episode-steps", type=int, default=None,
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the model and the envs")
+    p.add_argument("--n-timesteps", type=positive_int, default=None,
+                   help="override n_timesteps")  # fmt: skip
+    p.add_argument("--n-envs", type=positive_int, default=None, help="override n_envs")
+    p.add_argument("--max-episode-steps", type=positive_int, default=None,
                    help="override the config's TimeLimit cap")  # fmt: skip
-    p.add_argument("--max-wall-seconds", type=float, default=None,
+    p.add_argument("--max-wall-seconds", type=positive_float, default=None,
                    help="stop training after this wall time")  # fmt: skip
     p.add_argument("--vec-env", choices=("subproc", "dummy"), default=None,
                    help="vector env (None: the config's, else subproc)")  # fmt: skip
@@ -424,14 +437,9 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parse_cli(parser, argv)
-    if args.new_base_options and args.trained_agent is None:
-        parser.error(
-            "--new-base-options changes the base of a trained agent: give the "
-            "agent with --trained-agent (a new run takes the config's base as is)"
-        )
+def _resolved_config(args: argparse.Namespace) -> dict[str, Any]:
+    """The config with the command line's overrides, checked (ValueError saying what is
+    wrong): the run's numbers, the callbacks, the curriculum and a --trained-agent."""
     config = load_config(args.config or CONFIG_DIR / f"{args.algo}.yml")
     if args.n_timesteps is not None:
         config["n_timesteps"] = args.n_timesteps
@@ -442,6 +450,26 @@ def main(argv: list[str] | None = None) -> int:
         config["env_kwargs"] = {**(config["env_kwargs"] or {}),
                                 "max_episode_steps": args.max_episode_steps}  # fmt: skip
         config.pop("max_episode_steps", None)
+    check_run_config(config)
+    check_callbacks(config)
+    curriculum_settings(config)
+    if args.trained_agent is not None:
+        check_trained_agent(args.trained_agent, args.algo, config, args.new_base_options)
+    return config
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parse_cli(parser, argv)
+    if args.new_base_options and args.trained_agent is None:
+        parser.error(
+            "--new-base-options changes the base of a trained agent: give the "
+            "agent with --trained-agent (a new run takes the config's base as is)"
+        )
+    try:  # every check that needs no env, before the run directory is made
+        config = _resolved_config(args)
+    except (ValueError, OSError) as exc:  # UntrustedModelError is a ValueError
+        parser.error(str(exc))
     run = fresh_dir(args.out / f"{args.algo}_s{args.seed}")  # never overwrites a run
     train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
           max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,

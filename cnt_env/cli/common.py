@@ -105,8 +105,8 @@ def double_dash_option(
     further on; an option whose default is a list (``nargs="*"``) may be [] by right.
     Shared by cnt-sim (``app.main``) and the training CLIs (``training.common.parse_cli``).
     """
-    if not any(
-        isinstance(v, list) and not isinstance(parser.get_default(k), list)
+    if not any(  # [] only: an option's type may itself make a list (seed_list)
+        isinstance(v, list) and not v and not isinstance(parser.get_default(k), list)
         for k, v in vars(args).items()
     ):
         return None
