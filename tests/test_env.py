@@ -873,13 +873,14 @@ def test_record_video_writes_an_mp4(kw: dict, tmp_path) -> None:
     pytest.importorskip("moviepy", reason="the video extra (pip install -e '.[video]')")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(make(kw, render_mode="rgb_array", render_size=128), str(tmp_path),
+    folder = tmp_path / "videos"  # a new folder: RecordVideo warns when it exists
+    env = RecordVideo(make(kw, render_mode="rgb_array", render_size=128), str(folder),
                       episode_trigger=lambda i: True, disable_logger=True)  # fmt: skip
     env.reset(seed=0)
     for _ in range(3):
         env.step(np.zeros(2, np.float32))
     env.close()
-    videos = list(tmp_path.glob("*.mp4"))
+    videos = list(folder.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
 
 
