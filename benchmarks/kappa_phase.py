@@ -24,9 +24,14 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks.reproduce import load_done  # noqa: E402
+
 PROBE = ROOT / "benchmarks" / "results" / "kappa_phase"
 REPRODUCE = ROOT / "benchmarks" / "results" / "reproduce" / "results.jsonl"
 TRANSIENT = 150.0
@@ -65,8 +70,7 @@ def probe_records() -> list[dict]:
 def reproduce_records() -> list[dict]:
     """The table's κ̄_c rows (0.1, 0.15; 0.2 from the v̄ row): seed 0, default step."""
     out = []
-    for line in REPRODUCE.read_text().splitlines():
-        r = json.loads(line)
+    for r in load_done(REPRODUCE).values():
         if r["row"] in ("phase", "vbar") and r["seed"] == 0 and r["dt_factor"] == 0.05:
             out.append({"kappa_c_bar": r["kappa_c_bar"], "vbar": r["vbar"], "seed": 0,
                         "step": "default", "source": "reproduce/results.jsonl",

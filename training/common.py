@@ -36,6 +36,7 @@ __all__ = [
     "callback_settings",
     "check_callbacks",
     "check_run_config",
+    "csv_list",
     "curriculum_settings",
     "env_settings",
     "eval_settings",
@@ -127,9 +128,14 @@ def seed_int(text: str) -> int:
     return value
 
 
+def csv_list(text: str) -> list[str]:
+    """The items of a comma-separated list, stripped, empty items dropped."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
 def seed_list(text: str) -> list[int]:
     """argparse type: comma-separated episode seeds (each ≥ 0), at least one."""
-    seeds = [seed_int(x.strip()) for x in text.split(",") if x.strip()]
+    seeds = [seed_int(x) for x in csv_list(text)]
     if not seeds:
         raise argparse.ArgumentTypeError("give at least one seed")
     return seeds
@@ -138,7 +144,7 @@ def seed_list(text: str) -> list[int]:
 def held_out_targets(text: str, names: Sequence[str]) -> list[str]:
     """The held-out targets ``text`` names (comma separated, or ``all``: every one of
     ``names``); ValueError naming any that is not one of ``names``."""
-    targets = list(names) if text == "all" else [x.strip() for x in text.split(",") if x.strip()]
+    targets = list(names) if text == "all" else csv_list(text)
     unknown = [t for t in targets if t not in names]
     if unknown or not targets:
         raise ValueError(f"{unknown or 'none given'}: not held-out targets of this task; "

@@ -64,6 +64,7 @@ from .common import (
     ENV_ID,
     VALIDATION,
     HeldOutCycle,
+    csv_list,
     env_settings,
     eval_settings,
     fresh_dir,
@@ -743,10 +744,6 @@ def _normalised(row: dict[str, Any]) -> str:
     return "n/a" if math.isnan(x) else f"{round(x, 6) + 0.0:.3f}"
 
 
-def _csv_list(text: str) -> list[str]:
-    return [x.strip() for x in text.split(",") if x.strip()]
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
@@ -811,10 +808,10 @@ def main(argv: list[str] | None = None) -> int:
     from policies.sb3 import UntrustedModelError
 
     try:
-        evaluate(_csv_list(args.policies), targets, seeds, config, out,
+        evaluate(csv_list(args.policies), targets, seeds, config, out,
                  models=args.models, runs=args.runs, constant_from=args.constant_from,
                  jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
-                 reuse=args.reuse, redo=_csv_list(args.redo),
+                 reuse=args.reuse, redo=csv_list(args.redo),
                  trust=args.trust, video=args.video,
                  video_format=args.video_format)  # fmt: skip
     except (UntrustedModelError, FileNotFoundError) as exc:
