@@ -69,7 +69,7 @@ __all__ = [
 DRAG_LAWS = ("linear", "printed")
 CONTACT_MODES = ("event", "project")
 ADHESION_MODELS = ("eq1", "cohesive")  # forces.ADHESION_MODELS
-SLIDING_OPTIONS = ("B", "C")
+SLIDING_OPTIONS = ("B", "C", "none")
 SUBSTRATES = ("flat", "stepped")
 
 # Dimensionless groups settable on the command line: flag name (argparse dest) -> field.
@@ -265,6 +265,7 @@ class RunOptions:
     dt: float | None = None
     drag_law: str = MODEL["drag_law"]
     sliding: str = MODEL["sliding"]
+    friction: float = MODEL["friction"]
     coarse_delta: float | None = None
     fine_length: float | None = None
     contact_mode: str = "event"
@@ -300,6 +301,7 @@ class RunSpec:
             "dt_hbar_cap": None if c.dt is not None else c.step_hbar_cap,
             "drag_law": c.drag_law,
             "sliding": c.sliding,
+            "friction": c.friction,
             "coarse_delta": c.coarse_delta,
             "fine_length": c.fine_length,
             "residual_tol": c.newton.residual_tol,
@@ -364,12 +366,21 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         params = apply_substrate(params, opts.substrate)
     except units.ParameterError as exc:
         raise invalid(exc) from exc
+    if opts.friction != 0.0 and not params.is_stepped:
+        raise RunInputError(
+            "--friction resists the sliding of deposited nodes along the steps: the flat "
+            "sticky substrate holds them fixed, so it has no meaning there; drop it or use "
+            "a stepped substrate"
+        )
 
     length = RUN_DEPOSIT[opts.preset] if opts.deposit is None else opts.deposit
     try:
         length = units.check_number("--deposit", length, low=0.0, low_open=True,
                                     unit="(trace length in L_vb)")  # fmt: skip
         units.check_int("--seed", opts.seed, low=0)
+        friction = units.check_number(
+            "--friction", opts.friction, low=0.0, unit="(friction per unit length, in mu)"
+        )
     except units.ParameterError as exc:
         raise RunInputError(str(exc)) from exc
     transient = RUN_TRANSIENT[opts.preset] if opts.transient is None else opts.transient
@@ -400,7 +411,7 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,
             contact=ContactOptions(**contact), initial_radius=radius,
-            sliding=opts.sliding, coarse_delta=coarse,
+            sliding=opts.sliding, friction=friction, coarse_delta=coarse,
             fine_length=mesh["fine_length"] if opts.fine_length is None else opts.fine_length,
         )  # fmt: skip
     except (ValueError, TypeError) as exc:

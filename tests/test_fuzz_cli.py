@@ -211,13 +211,13 @@ SPECIAL = st.sampled_from(["/dev/null", "/dev/full", "/proc/x.npz", "/proc/self/
 RUN_FLOAT_FLAGS = ["--Hbar", "--Ibar", "--vbar", "--phi", "--kappa-c", "--delta", "--dt",
                    "--deposit", "--transient", "--kb", "--ev", "--rho", "--mu", "--H", "--v",
                    "--coarse-delta", "--fine-length", "--initial-radius", "--cohesive-range",
-                   "--max-wall-time"]  # fmt: skip
+                   "--friction", "--max-wall-time"]  # fmt: skip
 RUN_INT_FLAGS = ["--seed", "--max-nodes", "--max-steps"]
 CHOICES = {
     "--preset": ["coil", "serpentine", "x"],
     "--substrate": ["flat", "stepped", "steep"],
     "--drag-law": ["linear", "printed", "x"],
-    "--sliding": ["B", "C", "D"],
+    "--sliding": ["B", "C", "none", "D"],
     "--contact-mode": ["event", "project", "x"],
     "--adhesion": ["eq1", "cohesive", "x"],
 }

@@ -51,6 +51,10 @@ def test_run_options_is_frozen_and_resolve_matches_resolve_run() -> None:
         ({"seed": -1}, "--seed"),
         ({"seed": True}, "--seed"),
         ({"drag_law": "x"}, "--drag-law"),
+        ({"sliding": "A"}, "--sliding"),
+        ({"preset": "serpentine", "friction": -1.0}, "--friction"),
+        ({"preset": "serpentine", "friction": float("inf")}, "--friction"),
+        ({"friction": 1.0}, "--friction"),  # the coil preset's flat sticky substrate
         ({"preset": "x"}, "--preset"),
         ({"transient": -5.0}, "--transient"),
     ],
@@ -149,3 +153,46 @@ def test_wall_time_is_checked_while_the_run_progresses() -> None:
     with pytest.raises(runs.RunLimitError, match="--max-wall-time"):
         for i in range(64):  # 1 L_vb per step: always progressing
             guard(float(i + 1), 1000.0)
+
+
+def test_validation_choices_mirror_the_simulators() -> None:
+    """runs.py keeps numba-free copies of the simulator's choices for the CLI; they must
+    name exactly what the simulator accepts (``--sliding none`` was refused once)."""
+    from cnt_env.sim import deposition, forces, substrate
+
+    assert set(runs.DRAG_LAWS) == set(forces.DRAG_LAWS)
+    assert set(runs.ADHESION_MODELS) == set(forces.ADHESION_MODELS)
+    assert set(runs.CONTACT_MODES) == set(deposition.CONTACT_MODES)
+    assert set(runs.SLIDING_OPTIONS) == set(substrate.SLIDING_OPTIONS)
+
+
+def test_friction_reaches_the_simulator_and_its_record() -> None:
+    """--friction is DepositionConfig.friction, recorded in the run's config; at its
+    default it leaves a sweep's hash as before the option existed, so old sweeps resume."""
+    from cnt_env.sweep import grid
+
+    base = runs.RunOptions(preset="serpentine", deposit=5.0)
+    rough = dataclasses.replace(base, friction=2.5)
+    spec, rough_spec = runs.resolve(base), runs.resolve(rough)
+    assert spec.sim_config.friction == 0.0 and rough_spec.sim_config.friction == 2.5
+    assert rough_spec.config_dict()["friction"] == 2.5
+    without = {k: v for k, v in spec.config_dict().items() if k != "friction"}
+    assert without == {k: v for k, v in rough_spec.config_dict().items() if k != "friction"}
+    assert grid.sweep_hash(spec, ["vbar"], base) != grid.sweep_hash(rough_spec, ["vbar"], rough)
+
+
+def test_a_committed_sweep_keeps_its_hash() -> None:
+    """The sweep recorded in benchmarks/results/kappa_phase resolves today to the hash in
+    its rows, so ``cnt-sim sweep`` resumes it: an option added to the run config since
+    (such as --friction) must leave the hash of runs that do not use it unchanged."""
+    import json
+    from pathlib import Path
+
+    from cnt_env.cli import app
+    from cnt_env.cli.sweep import sweep_options
+    from cnt_env.sweep import grid
+
+    record = Path(__file__).parents[1] / "benchmarks/results/kappa_phase/sweep.csv.json"
+    saved = json.loads(record.read_text())
+    plan = grid.resolve_sweep(sweep_options(app.build_parser().parse_args(saved["argv"])))
+    assert plan.config_hash == saved["config_hash"]

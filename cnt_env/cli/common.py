@@ -205,6 +205,14 @@ def add_model_arguments(m: Any) -> None:
         f"and z (default: {MODEL['sliding']})",
     )
     m.add_argument(
+        "--friction",
+        type=float,
+        default=MODEL["friction"],
+        metavar="ETA",
+        help="stepped substrate: viscous friction on each sliding DOF of a deposited node, "
+        f"-ETA l u, ETA in units of mu (default: {MODEL['friction']:g}; docs/model.md §4)",
+    )
+    m.add_argument(
         "--coarse-delta",
         type=float,
         default=None,

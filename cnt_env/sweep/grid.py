@@ -223,6 +223,8 @@ def sweep_hash(spec: runs.RunSpec, swept: Sequence[str], base: runs.RunOptions) 
     config = spec.config_dict()
     for derived in ("seed", "substrate", "initial_radius", "dt"):
         config.pop(derived, None)
+    if config.get("friction") == 0.0:  # added to the config later: at its default it
+        config.pop("friction")  # keeps the hash of sweeps recorded before, which resume
     given = {"substrate": base.substrate, "initial_radius": base.initial_radius, "dt": base.dt}
     return config_hash({"params": params, "config": config, "given": given, "swept": list(swept)})
 
