@@ -597,6 +597,43 @@ def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in current if latest[point(r)] is r]
 
 
+#: The paper's ranges in SI units (docs/model.md §6): over 0 <= vbar <= 0.13 its
+#: serpentine amplitudes lie within 3-13 um and its wavelengths within 0.5-3 um;
+#: experiments report coil radii of 0.5-5 um. (row, measure, low, high, what) in um.
+PAPER_SI: list[tuple[tuple[str, ...], str, float, float, str]] = [
+    (("vbar",), "amplitude", 3.0, 13.0, "serpentine amplitude A, vbar row"),
+    (("vbar",), "wavelength_x", 0.5, 3.0, "serpentine wavelength lambda_x, vbar row"),
+    (("coil", "coil_groups"), "coil_radius", 0.5, 5.0, "coil radius R0, coil rows (experiments)"),
+]
+
+
+def si_section(recs: list[dict[str, Any]]) -> list[str]:
+    """The model's ranges in micrometres, with L_vb of the paper's tube on each substrate
+    (units.preset; the H and I rows change H and rho, not L_vb), against PAPER_SI. The
+    amplitude is half the peak-to-peak distance (docs/model.md §7), as in the paper's range
+    (its A ~ 100 and ~ 25 are 12.8 and 3.2 um, the range's ends); peak to peak is given
+    too."""
+    from cnt_env import units
+
+    l_um = {p: units.preset(p).L_vb * 1e6 for p in units.PRESETS}
+    lines = ["", "## In SI units, against the paper's ranges", "",
+             f"L_vb = {l_um[SERP]:.4f} um (stepped), {l_um[COIL]:.4f} um (flat).", "",
+             "| quantity | paper (um) | model (um) | points | inside |",
+             "|---|---|---|---|---|"]  # fmt: skip
+    for row_names, qty, low, high, what in PAPER_SI:
+        hits = [r for r in recs if r["row"] in row_names and r.get(qty)]
+        if not hits:
+            lines.append(f"| {what} | {low:g}-{high:g} | not run | 0 | |")
+            continue
+        um = [r[qty] * l_um[r["preset"]] for r in hits]
+        inside = sum(low <= v <= high for v in um)
+        got = f"{min(um):.2f}-{max(um):.2f}"
+        if qty == "amplitude":
+            got += f" (peak to peak {2 * min(um):.2f}-{2 * max(um):.2f})"
+        lines.append(f"| {what} | {low:g}-{high:g} | {got} | {len(um)} | {inside} of {len(um)} |")
+    return lines
+
+
 def summary(records: list[dict[str, Any]], candidate: str) -> str:
     every = [r for r in records if r["candidate"] == candidate]
     recs = headline(every)
@@ -618,6 +655,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
         hits = [r for r in recs if _match(r, "vbar", groups)]
         got = hits[0]["pattern"] if hits else "not run"
         lines.append(f"| class at vbar = {groups['vbar']} | {cls} | {got} | |")
+    lines += si_section(recs)
     lines += ["", "## All points", "",
               "| row | groups | class | A | lambda_x | lambda_prog | CV A | CV lambda "
               "| settled CV A / lambda | cycles | loops | crossings | R0 | wall s | error |",

@@ -173,3 +173,25 @@ def test_every_candidate_makes_a_valid_config_at_every_point() -> None:
                     continue
                 got = cfg.contact.adhesion if field == "adhesion" else getattr(cfg, field)
                 assert got == changes[field], (name, p["row"], field)
+
+
+def test_si_section_converts_with_each_substrates_length() -> None:
+    """The paper's SI ranges are checked in micrometres: a stepped point's lengths times
+    L_vb of the stepped substrate, a coil's times the flat one's, and the count inside."""
+    from cnt_env import units
+
+    l_serp = units.preset("serpentine").L_vb * 1e6
+    l_coil = units.preset("coil").L_vb * 1e6
+    recs = [
+        {"row": "vbar", "preset": "serpentine", "amplitude": 4.0 / l_serp,
+         "wavelength_x": 1.0 / l_serp},
+        {"row": "vbar", "preset": "serpentine", "amplitude": 20.0 / l_serp,
+         "wavelength_x": 0.4 / l_serp},
+        {"row": "phi", "preset": "serpentine", "amplitude": 99.0, "wavelength_x": 99.0},
+        {"row": "coil_groups", "preset": "coil", "coil_radius": 0.6 / l_coil},
+    ]  # fmt: skip
+    text = "\n".join(reproduce.si_section(recs))
+    amplitude = "| 3-13 | 4.00-20.00 (peak to peak 8.00-40.00) | 2 | 1 of 2 |"
+    assert f"| serpentine amplitude A, vbar row {amplitude}" in text
+    assert "| serpentine wavelength lambda_x, vbar row | 0.5-3 | 0.40-1.00 | 2 | 1 of 2 |" in text
+    assert "| coil radius R0, coil rows (experiments) | 0.5-5 | 0.60-0.60 | 1 | 1 of 1 |" in text
