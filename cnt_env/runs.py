@@ -366,12 +366,6 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         params = apply_substrate(params, opts.substrate)
     except units.ParameterError as exc:
         raise invalid(exc) from exc
-    if opts.friction != 0.0 and not params.is_stepped:
-        raise RunInputError(
-            "--friction resists the sliding of deposited nodes along the steps: the flat "
-            "sticky substrate holds them fixed, so it has no meaning there; drop it or use "
-            "a stepped substrate"
-        )
 
     length = RUN_DEPOSIT[opts.preset] if opts.deposit is None else opts.deposit
     try:
@@ -383,6 +377,12 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         )
     except units.ParameterError as exc:
         raise RunInputError(str(exc)) from exc
+    if friction != 0.0 and not params.is_stepped:
+        raise RunInputError(
+            "--friction resists the sliding of deposited nodes along the steps: the flat "
+            "sticky substrate holds them fixed, so it has no meaning there; drop it or use "
+            "a stepped substrate"
+        )
     transient = RUN_TRANSIENT[opts.preset] if opts.transient is None else opts.transient
     measure_options = measure_options_for(transient)
 

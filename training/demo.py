@@ -74,7 +74,6 @@ def main(argv: list[str] | None = None) -> int:
         targets = held_out_targets(args.targets, held_out_names(env_settings(eval_config)[0]))
     except ValueError as exc:
         p.error(f"--targets: {exc}")
-    seeds = args.seeds
     config = load_config(CONFIG_DIR / DEMO_CONFIG)
     runs = []
     if not args.no_train:
@@ -90,11 +89,11 @@ def main(argv: list[str] | None = None) -> int:
         runs.append(args.out / "runs" / "ppo_s0")
     policies = ["random", "constant", "scripted"]
     policies += [p for p in DEMO_MODELS if (PRETRAINED / f"{p}.zip").is_file()]
-    print(f"[demo] 2/3 evaluation of {policies} on {targets}, seeds {seeds}")
+    print(f"[demo] 2/3 evaluation of {policies} on {targets}, seeds {args.seeds}")
     evaluate(
         policies,
         targets,
-        seeds,
+        args.seeds,
         eval_config,
         args.out / "results",
         models=PRETRAINED,

@@ -802,13 +802,12 @@ def main(argv: list[str] | None = None) -> int:
         targets = held_out_targets(args.targets, held_out_names(env_kwargs))
     except ValueError as exc:
         parser.error(f"--targets: {exc}")
-    seeds = args.seeds
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
     print(f"results -> {out}")
     from policies.sb3 import UntrustedModelError
 
     try:
-        evaluate(csv_list(args.policies), targets, seeds, config, out,
+        evaluate(csv_list(args.policies), targets, args.seeds, config, out,
                  models=args.models, runs=args.runs, constant_from=args.constant_from,
                  jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
                  reuse=args.reuse, redo=csv_list(args.redo),

@@ -214,6 +214,11 @@ def point_options(
     return dataclasses.replace(base, groups=groups, extra_groups=extra, seed=seed)
 
 
+#: Run-config fields added after sweeps were recorded, and their defaults: a field at its
+#: default is left out of the hash, so that a sweep recorded before it existed resumes.
+LATER_CONFIG_FIELDS: dict[str, Any] = {"friction": 0.0}
+
+
 def sweep_hash(spec: runs.RunSpec, swept: Sequence[str], base: runs.RunOptions) -> str:
     """Hash of everything that defines a sweep's points apart from the swept groups and
     the seed: the other groups, the solver and measurement options, the deposit length.
@@ -223,8 +228,9 @@ def sweep_hash(spec: runs.RunSpec, swept: Sequence[str], base: runs.RunOptions) 
     config = spec.config_dict()
     for derived in ("seed", "substrate", "initial_radius", "dt"):
         config.pop(derived, None)
-    if config.get("friction") == 0.0:  # added to the config later: at its default it
-        config.pop("friction")  # keeps the hash of sweeps recorded before, which resume
+    for key, default in LATER_CONFIG_FIELDS.items():
+        if config.get(key) == default:
+            config.pop(key)
     given = {"substrate": base.substrate, "initial_radius": base.initial_radius, "dt": base.dt}
     return config_hash({"params": params, "config": config, "given": given, "swept": list(swept)})
 
