@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cnt_env.cli.common import name_list
+
 
 def _episode(job: tuple[str, str, int, str]) -> tuple[str, int, float]:
     """Score of model ``name`` (or the follower, ``scripted``) on validation route i."""
@@ -60,14 +62,14 @@ def main(argv: list[str] | None = None) -> None:
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--models", required=True)
-    p.add_argument("--names", required=True, help="comma separated model names")
+    p.add_argument("--names", type=name_list, required=True, help="comma separated model names")
     p.add_argument("--routes", type=int, default=12)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--config", default=str(CONFIG_DIR / "ppo_residual.yml"))
     p.add_argument("--heldout", default=None, help="cnt-evaluate results dir of the models")
     p.add_argument("--out", default=None, help="JSON file of the scores")
     args = p.parse_args(argv)
-    names = ["scripted", *args.names.split(",")]
+    names = ["scripted", *args.names]
     jobs = [(args.models, n, i, args.config) for n in names for i in range(args.routes)]
     t0 = time.perf_counter()
     scores: dict[str, list[float]] = {n: [float("nan")] * args.routes for n in names}

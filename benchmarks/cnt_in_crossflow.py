@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cnt_env.cli.common import int_list
 from cnt_env.sim.stepper import DragParams, NewtonOptions, Rod, RodMaterial
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -117,7 +118,7 @@ def run_der(
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", default="200,400", help="comma-separated edge counts")
+    parser.add_argument("--n", type=int_list, default="200,400", help="comma-separated edge counts")
     parser.add_argument("--t-end", type=float, default=300.0, help="us")
     parser.add_argument("--dt-early", type=float, default=0.01, help="us, up to 2 us")
     parser.add_argument("--dt-max", type=float, default=2.0, help="us")
@@ -135,7 +136,7 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     for law, sigma in laws.items():
         ref_tip = refs[law]
-        for n in (int(x) for x in args.n.split(",")):
+        for n in args.n:
             row = run_der(
                 n, t_end=args.t_end, dt_early=args.dt_early, dt_max=args.dt_max, sigma=sigma
             )

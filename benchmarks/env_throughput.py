@@ -51,6 +51,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from cnt_env.cli.common import name_list  # noqa: E402
 from cnt_env.patterns import MeasureOptions  # noqa: E402
 from cnt_env.patterns import measure as measure_pattern  # noqa: E402
 from cnt_env.presets import SURROGATE  # noqa: E402
@@ -180,7 +181,9 @@ def baseline(kwargs: dict, steps: int) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=200)
-    parser.add_argument("--presets", default="serpentine,coil", help="comma separated")
+    parser.add_argument(
+        "--presets", type=name_list, default="serpentine,coil", help="comma separated"
+    )
     parser.add_argument("--out", default=None, help="also write the JSON here")
     parser.add_argument(
         "--previous",
@@ -221,7 +224,7 @@ def main(argv: list[str] | None = None) -> None:
         "goal_lvb_per_cpu_s": GOAL_LVB_PER_CPU_S,
         "argv": sys.argv[1:] if argv is None else list(argv),
     }  # fmt: skip
-    for preset in [x for x in args.presets.split(",") if x]:
+    for preset in args.presets:
         result[preset] = measure(dict(base, preset=preset), args.steps)
         result[preset]["meets_goal"] = result[preset]["lvb_per_cpu_s"] >= GOAL_LVB_PER_CPU_S
         if args.previous:

@@ -27,6 +27,8 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from cnt_env.cli.common import name_list, seed_list
+
 FAMILIES = ("straight", "l_route", "u_route", "staircase", "arc", "band", "pads", "detour")
 VARIANTS = {
     "round3": {"plan": False, "observed_band": False, "memory": 0, "lead": 0.0},
@@ -71,8 +73,8 @@ def _episode(job: tuple) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--families", default=",".join(FAMILIES))
-    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--families", type=name_list, default=",".join(FAMILIES))
+    p.add_argument("--seeds", type=seed_list, default="0,1,2")
     p.add_argument("--variant", action="append", default=[],
                    help="NAME=JSON options (default: round3, plan, default)")  # fmt: skip
     p.add_argument("--config", type=Path, default=ROOT / "training/configs/ppo_residual.yml")
@@ -85,8 +87,7 @@ def main(argv: list[str] | None = None) -> None:
         for v in args.variant:
             name, _, text = v.partition("=")
             variants[name] = json.loads(text) if text else {}
-    seeds = [int(s) for s in args.seeds.split(",")]
-    families = args.families.split(",")
+    seeds, families = args.seeds, args.families
     jobs = [(name, opts, f, s, str(args.config))
             for name, opts in variants.items() for f in families for s in seeds]  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -30,6 +30,8 @@ import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from cnt_env.cli.common import seed_list  # noqa: E402
+
 
 def run_case(case: dict) -> dict:
     from cnt_env.patterns import MeasureOptions, measure
@@ -90,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--fine", default="20", help="fine_length values (L_vb)")
     ap.add_argument("--vbar", default="0.037")
     ap.add_argument("--phi", default="0")
-    ap.add_argument("--seeds", default="0", help="start-up perturbation seeds")
+    ap.add_argument("--seeds", type=seed_list, default="0", help="start-up perturbation seeds")
     ap.add_argument("--deposit", type=float, default=600.0)
     ap.add_argument("--transient", type=float, default=150.0)
     ap.add_argument("--validated", action="store_true", help="serpentine: the model's dt and tail")
@@ -105,7 +107,7 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     cases = []
     for seed, coarse, fine, vbar, phi, dtf in itertools.product(
-        [int(v) for v in args.seeds.split(",")],
+        args.seeds,
         _floats(args.coarse),
         _floats(args.fine),
         _floats(args.vbar),

@@ -27,6 +27,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from cnt_env.cli.common import float_list, name_list, seed_list  # noqa: E402
+
 OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
 
 
@@ -69,22 +71,21 @@ def main(argv: list[str] | None = None) -> int:
     from cnt_env.task.routes import HELD_OUT
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--targets", default=",".join(HELD_OUT))
-    ap.add_argument("--seeds", default="0")
-    ap.add_argument("--turns", default="-0.4,0.4", help="radians")
-    ap.add_argument("--speeds", default="0.5", help="fractions of the follower's speed")
+    ap.add_argument("--targets", type=name_list, default=",".join(HELD_OUT))
+    ap.add_argument("--seeds", type=seed_list, default="0")
+    ap.add_argument("--turns", type=float_list, default="-0.4,0.4", help="radians")
+    ap.add_argument(
+        "--speeds", type=float_list, default="0.5", help="fractions of the follower's speed"
+    )
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
 
-    def floats(text: str) -> list[float]:
-        return [float(x) for x in text.split(",") if x.strip()]
-
-    common = {"turns": floats(args.turns), "speeds": floats(args.speeds)}
+    common = {"turns": args.turns, "speeds": args.speeds}
     jobs = [
-        {"mode": mode, "target": t, "seed": int(s), **common}
-        for s in args.seeds.split(",")
-        for t in args.targets.split(",")
+        {"mode": mode, "target": t, "seed": s, **common}
+        for s in args.seeds
+        for t in args.targets
         for mode in ("oracle", "follower")
     ]
     rows = []

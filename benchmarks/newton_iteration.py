@@ -23,6 +23,7 @@ import time
 import numpy as np
 from scipy.linalg import lapack
 
+from cnt_env.cli.common import int_list
 from cnt_env.rod.banded import KL, KU, band_lu_factor, band_lu_solve
 from cnt_env.sim.stepper import (
     SOFT_FRESH,
@@ -136,9 +137,9 @@ def bench(n_nodes: int, repeats: int) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
-    parser.add_argument("--sizes", default="250,500,1000,2000")
+    parser.add_argument("--sizes", type=int_list, default="250,500,1000,2000")
     args = parser.parse_args(argv)
-    rows = [bench(int(n), args.repeats) for n in args.sizes.split(",")]
+    rows = [bench(n, args.repeats) for n in args.sizes]
     per_node = [r["iteration_us"] / r["n_nodes"] for r in rows]
     out = {
         "benchmark": "newton_iteration",

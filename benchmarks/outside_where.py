@@ -31,6 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from cnt_env.cli.common import csv_list  # noqa: E402
 
 
 def _outside_nodes(trace: np.ndarray, route: np.ndarray,
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", type=Path, nargs="+", help="cnt-evaluate result directories")
     ap.add_argument("--first", type=float, default=60.0, help="L_vb of trace from the start")
-    ap.add_argument("--skip", default="detour_block",
+    ap.add_argument("--skip", type=csv_list, default="detour_block",
                     help="comma separated routes left out (default: the keep-out route, "
                          "whose loss is its detour)")  # fmt: skip
     ap.add_argument("--out", type=Path, help="write the figures here (JSON)")
@@ -147,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"| {p} | " + " | ".join(f"{lft:.1f} / {rgt:.1f}" for lft, rgt in v) + " |")
             print()
         return 0
-    skip = {t for t in args.skip.split(",") if t}
+    skip = set(args.skip)
     reports = []
     for d in args.results:
         rep = analyse(d, args.first, skip)

@@ -41,6 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cnt_env.cli.common import float_list  # noqa: E402
 from cnt_env.sim.deposition import ContactOptions  # noqa: E402
 
 
@@ -178,8 +179,12 @@ def budget(preset: str, delta: float, transient: float, window: float, near: flo
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--preset", default="serpentine", choices=("serpentine", "coil"))
-    ap.add_argument("--delta", default="1,0.5,0.2", help="comma separated delta_bar values")
-    ap.add_argument("--vbar", default=None, help="comma separated vbar values (serpentine)")
+    ap.add_argument(
+        "--delta", type=float_list, default="1,0.5,0.2", help="comma separated delta_bar values"
+    )
+    ap.add_argument(
+        "--vbar", type=float_list, default=None, help="comma separated vbar values (serpentine)"
+    )
     ap.add_argument(
         "--transient",
         type=float,
@@ -204,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--cohesive-range",
+        type=float_list,
         default="0.05",
         help="comma separated ranges h of the cohesive adhesion, L_vb",
     )
@@ -212,13 +218,9 @@ def main(argv: list[str] | None = None) -> int:
     transient = args.transient
     if transient is None:
         transient = 150.0 if args.preset == "serpentine" else 300.0
-    vbars = [None] if args.vbar is None else [float(v) for v in args.vbar.split(",")]
-    ranges = (
-        [None] if args.adhesion == "eq1" else [float(h) for h in args.cohesive_range.split(",")]
-    )
-    for delta, vbar, h in itertools.product(
-        [float(d) for d in args.delta.split(",")], vbars, ranges
-    ):
+    vbars = [None] if args.vbar is None else args.vbar
+    ranges = [None] if args.adhesion == "eq1" else args.cohesive_range
+    for delta, vbar, h in itertools.product(args.delta, vbars, ranges):
         changes: dict = {} if vbar is None else {"vbar": vbar}
         if args.dt_factor is not None:
             changes["dt_factor"] = args.dt_factor

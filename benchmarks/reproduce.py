@@ -40,6 +40,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from cnt_env.cli.common import seed_list  # noqa: E402
+
 #: Named model configurations of the study (DepositionConfig fields). "default" is
 #: whatever presets.py / DepositionConfig carry; the others name what they change.
 CANDIDATES: dict[str, dict[str, Any]] = {
@@ -953,6 +955,7 @@ def main(argv: list[str] | None = None) -> int:
                          "1500, the preset's run, gives the keys of reproduce_1500)")  # fmt: skip
     ap.add_argument(
         "--seeds",
+        type=seed_list,
         default="0",
         help="comma-separated seeds of the start-up perturbation; every point "
         "runs once per seed (default 0; the summary gives the seeds' spread)",
@@ -1003,10 +1006,7 @@ def main(argv: list[str] | None = None) -> int:
         table = {k: [p for p in v if p["groups"] in wanted] for k, v in table.items()}
         if not any(table.values()):
             ap.error(f"no point of the table has the groups {args.point}")
-    try:
-        seeds = [int(x) for x in args.seeds.split(",")]
-    except ValueError:
-        ap.error(f"--seeds takes comma-separated integers, got {args.seeds!r}")
+    seeds: list[int] = args.seeds
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)

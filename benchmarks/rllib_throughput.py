@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from cnt_env.cli.common import int_list
 from training.common import CONFIG_DIR, load_config
 from training.rllib import _import_ray, build_config
 
@@ -58,7 +59,9 @@ def measure(zoo: dict, runners: int, iterations: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runners", default="1,2", help="comma-separated env-runner counts")
+    ap.add_argument(
+        "--runners", type=int_list, default="1,2", help="comma-separated env-runner counts"
+    )
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml")
     ap.add_argument("--n-steps", type=int, default=256, help="rollout steps per runner")
@@ -69,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     zoo["n_steps"] = args.n_steps
     zoo["n_epochs"] = 1
     rows = []
-    counts = [int(x) for x in args.runners.split(",")]
+    counts = args.runners
     ray.init(num_cpus=max(counts) + 1, include_dashboard=False, log_to_driver=False)
     try:
         for n in counts:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from cnt_env.cli.common import seed_list  # noqa: E402
 
 
 def routes() -> dict[str, dict]:
@@ -57,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     from training.evaluate import run_episode
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", default="0,1", help="comma separated episode seeds")
+    ap.add_argument("--seeds", type=seed_list, default="0,1", help="comma separated episode seeds")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--config", type=Path, default=ROOT / "training/configs/eval.yml")
     ap.add_argument("--model", type=Path, default=ROOT / "policies/pretrained/ppo_residual.zip")
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     env_kwargs, max_steps = env_settings(load_config(args.config))
     policies = {"scripted": {"kind": "scripted"},
                 "ppo_residual": {"kind": "ppo_residual", "model": str(args.model)}}  # fmt: skip
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = args.seeds
     jobs = [{"policy": p, "spec": spec, "target": r, "seed": s, "env_kwargs": env_kwargs,
              "max_steps": max_steps, "save_dir": None}
             for r in routes().values() for p, spec in policies.items() for s in seeds]  # fmt: skip

@@ -34,6 +34,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from cnt_env.cli.common import name_list, seed_list  # noqa: E402
+
 EVAL = ROOT / "training/configs/eval.yml"
 
 
@@ -114,8 +116,10 @@ def main(argv: list[str] | None = None) -> int:
     from cnt_env.task.routes import HELD_OUT
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--targets", default=",".join(t for t in HELD_OUT if t != "detour_block"))
-    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument(
+        "--targets", type=name_list, default=",".join(t for t in HELD_OUT if t != "detour_block")
+    )
+    ap.add_argument("--seeds", type=seed_list, default="0,1,2")
     ap.add_argument("--steps", type=int, default=2, help="control steps searched")
     ap.add_argument("--directions", type=int, default=8, help="flow directions per step")
     ap.add_argument("--first", type=float, default=60.0, help="L_vb: the start's share")
@@ -126,8 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     common = {"steps": args.steps, "directions": args.directions, "first": args.first,
               "until": args.until, "config": str(args.config)}  # fmt: skip
-    jobs = [{"target": t, "seed": int(s), **common}
-            for s in args.seeds.split(",") for t in args.targets.split(",")]  # fmt: skip
+    jobs = [{"target": t, "seed": s, **common} for s in args.seeds for t in args.targets]
     rows = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(search, jobs):

@@ -40,6 +40,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from cnt_env.cli.common import float_list  # noqa: E402
 from cnt_env.io import to_jsonable  # noqa: E402
 from cnt_env.task.env import CNTDepositEnv  # noqa: E402
 from cnt_env.task.spaces import action_from_flow  # noqa: E402
@@ -157,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--hold", type=int, default=150, help="control steps per direction")
     p.add_argument("--vbar", type=float, default=0.13)
-    p.add_argument("--speeds", default="0.065,0.1,0.13", help="speeds of the width runs")
+    p.add_argument(
+        "--speeds", type=float_list, default="0.065,0.1,0.13", help="speeds of the width runs"
+    )
     p.add_argument("--width-steps", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=OUT)
@@ -171,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     flows = [(args.vbar, phi) for phi in PHIS]
     steps = analyse(run(env, flows, args.hold, args.seed), flows, args.hold)
     widths = []
-    for v in (float(x) for x in args.speeds.split(",")):
+    for v in args.speeds:
         ph = analyse(run(env, [(v, 0.0)], args.width_steps, args.seed), [(v, 0.0)],
                      args.width_steps)["phases"][0]  # fmt: skip
         widths.append({k: ph[k] for k in ("vbar", "drift_rate", "drift_angle",

@@ -25,6 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from cnt_env.cli.common import name_list
 from cnt_env.presets import ENV_MESH, ENV_SIM_DEFAULTS, NEWTON, SURROGATE
 
 if TYPE_CHECKING:
@@ -255,7 +256,9 @@ def _same_settings(args: argparse.Namespace, name: str, cached: dict | None,
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("suite", choices=sorted(CASES))
-    parser.add_argument("--cases", default=None, help="comma-separated (default: all)")
+    parser.add_argument(
+        "--cases", type=name_list, default=None, help="comma-separated (default: all)"
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--deposit", type=float, default=700.0)
     parser.add_argument("--transient", type=float, default=300.0)
@@ -264,7 +267,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     results = Path(args.results or RESULTS_DIR / f"{args.suite}_validation.json")
     done = json.loads(results.read_text()) if results.exists() else {}
-    names = args.cases.split(",") if args.cases else list(CASES[args.suite])
+    names = args.cases or list(CASES[args.suite])
     todo = [c for c in names if args.force or not _same_settings(args, c, done.get(c))]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {

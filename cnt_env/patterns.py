@@ -1068,6 +1068,7 @@ def measure(
         "substrate": substrate,
         "measured_length": length,
         "transient_length": float(options.transient_length),
+        "settled_fraction": float(options.settled_fraction),
         "n_points": int(m.points.shape[0]),
         # a loose (rosette) radius only where the trace is a coil
         "coil_radius": float(coil["median"])

@@ -91,6 +91,7 @@ FLAGS: dict[str, str] = {
     **{f: "--" + dest for dest, f in SI_FIELDS.items()},
     "phi": "--phi",
     "transient_length": "--transient",
+    "settled_fraction": "--settled-fraction",
     "dt": "--dt",
     "initial_radius": "--initial-radius",
     "coarse_delta": "--coarse-delta",
@@ -262,6 +263,7 @@ class RunOptions:
     deposit: float | None = None
     seed: int = 0
     transient: float | None = None
+    settled_fraction: float | None = None
     dt: float | None = None
     drag_law: str = MODEL["drag_law"]
     sliding: str = MODEL["sliding"]
@@ -312,6 +314,7 @@ class RunSpec:
             "initial_radius": c.initial_radius,
             "perturbation": c.perturbation,
             "transient_length": self.measure_options.transient_length,
+            "settled_fraction": self.measure_options.settled_fraction,
             "si": None if self.physical is None else dataclasses.asdict(self.physical),
         }
 
@@ -384,7 +387,7 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
             "a stepped substrate"
         )
     transient = RUN_TRANSIENT[opts.preset] if opts.transient is None else opts.transient
-    measure_options = measure_options_for(transient)
+    measure_options = measure_options_for(transient, opts.settled_fraction)
 
     from cnt_env.sim.deposition import ContactOptions, DepositionConfig
 
@@ -436,14 +439,16 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
     )
 
 
-def measure_options_for(transient: float | None) -> MeasureOptions:
-    """Measurement options with ``transient`` L_vb dropped (None: the default)."""
+def measure_options_for(
+    transient: float | None, settled_fraction: float | None = None
+) -> MeasureOptions:
+    """Measurement options with ``transient`` L_vb dropped and the classes judged on the
+    last ``settled_fraction`` of the U-turns (None: the defaults)."""
     from cnt_env.patterns import MeasureOptions
 
+    given = {"transient_length": transient, "settled_fraction": settled_fraction}
     try:
-        if transient is None:
-            return MeasureOptions()
-        return MeasureOptions(transient_length=transient)
+        return MeasureOptions(**{k: v for k, v in given.items() if v is not None})
     except ValueError as exc:
         raise invalid(exc) from exc
 

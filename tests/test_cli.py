@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import os
 import subprocess
 import sys
@@ -39,7 +40,8 @@ RUN_KEYS = {
     "config",
     "version",
 }
-CONFIG_KEYS = {"dt", "drag_law", "sliding", "contact_mode", "seed", "initial_radius"}
+CONFIG_KEYS = {"dt", "drag_law", "sliding", "contact_mode", "seed", "initial_radius",
+               "settled_fraction"}  # fmt: skip
 TINY = ["--deposit", "5", "--Hbar", "40", "--transient", "0", "--delta", "1"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -476,3 +478,96 @@ def test_an_option_given_double_dash_as_its_value_is_a_usage_error(
     flag = next(a for a in argv if a.endswith("=--")).split("=")[0]
     assert f"{flag} got '--' as its value" in err
     assert "unexpected" not in err
+
+
+@pytest.mark.parametrize(
+    ("kind", "text", "expected"),
+    [
+        ("seed_list", "0, 1,2", [0, 1, 2]),
+        ("int_list", "250,500", [250, 500]),
+        ("float_list", "1,0.5,2e-1", [1.0, 0.5, 0.2]),
+        ("name_list", "u_turn,,l_up", ["u_turn", "l_up"]),
+        ("positive_float", "3.5", 3.5),
+    ],
+)
+def test_list_types_parse(kind: str, text: str, expected: object) -> None:
+    from cnt_env.cli import common
+
+    assert getattr(common, kind)(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("kind", "text", "message"),
+    [
+        ("seed_list", "0,x", "'x' is not an integer"),
+        ("seed_list", "0,-1", "a seed must be ≥ 0"),
+        ("seed_list", ",", "at least one seed"),
+        ("int_list", "0", "positive integer"),
+        ("float_list", "1,nan", "finite"),
+        ("float_list", "1,a", "'a' is not a number"),
+        ("name_list", " , ", "at least one name"),
+        ("positive_float", "inf", "finite number > 0"),
+    ],
+)
+def test_list_types_refuse_with_a_message(kind: str, text: str, message: str) -> None:
+    import argparse
+
+    from cnt_env.cli import common
+
+    with pytest.raises(argparse.ArgumentTypeError, match=message):
+        getattr(common, kind)(text)
+
+
+@pytest.mark.parametrize(
+    ("script", "argv"),
+    [
+        ("follower_study", ["--seeds", "0,x"]),
+        ("power_budget", ["--delta", "1,nan"]),
+        ("newton_iteration", ["--sizes", "0"]),
+        ("reproduce", ["--seeds", "a"]),
+        ("route_breadth", ["--seeds", ""]),
+    ],
+)
+def test_a_benchmark_list_flag_is_a_usage_error(
+    script: str, argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bad comma-separated value stops a benchmark with argparse's one-line error."""
+    import importlib
+
+    module = importlib.import_module(f"benchmarks.{script}")
+    with pytest.raises(SystemExit) as exc:
+        module.main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {argv[0]}" in err and "Traceback" not in err
+
+
+def test_measure_judges_the_class_on_the_settled_fraction_given(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--settled-fraction``: a serpentine whose start-up decays over its first cycles
+    is periodic on its settled half (the default) and irregular judged whole (1.0); the
+    run's own fraction is used when the flag is absent, and the measure reports it."""
+    from cnt_env.io import save_trace
+    from tests.test_patterns import A_BAR, LAMBDA_BAR, serpentine_curve
+
+    steady = 2 * A_BAR - LAMBDA_BAR / 2
+    xz = serpentine_curve([steady * (1.0 + 0.8 * math.exp(-k / 5.0)) for k in range(44)],
+                          LAMBDA_BAR, 0.5)  # fmt: skip
+    trace = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    params = units.paper_groups("serpentine")
+    config = {"substrate": "stepped", "transient_length": 0.0, "settled_fraction": 1.0}
+    path = save_trace(tmp_path / "t.npz", trace, params, config, {"steps": 1})
+
+    def measured(*flags: str) -> dict:
+        assert cli.main(["measure", str(path), "--json", *flags]) == 0
+        return _strict_json(capsys.readouterr().out)
+
+    whole = measured()  # the run's fraction, 1.0
+    assert whole["pattern"] == "irregular-serpentine"
+    assert whole["measure"]["settled_fraction"] == 1.0
+    settled = measured("--settled-fraction", "0.5")
+    assert settled["pattern"] == "periodic-serpentine"
+    assert settled["measure"]["settled_amplitude_cv"] < 0.02 < whole["measure"]["amplitude_cv"]
+    assert cli.main(["measure", str(path), "--settled-fraction", "0"]) == 2
+    assert "--settled-fraction" in capsys.readouterr().err

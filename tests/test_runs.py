@@ -181,6 +181,26 @@ def test_friction_reaches_the_simulator_and_its_record() -> None:
     assert grid.sweep_hash(spec, ["vbar"], base) != grid.sweep_hash(rough_spec, ["vbar"], rough)
 
 
+def test_the_settled_fraction_reaches_the_measure_and_its_record() -> None:
+    """--settled-fraction is MeasureOptions.settled_fraction, recorded in the run's
+    config; a sweep at the default keeps its hash (an old sweep resumes), another one is
+    a different sweep."""
+    from cnt_env.patterns import MeasureOptions
+    from cnt_env.sweep import grid
+
+    base = runs.RunOptions(preset="serpentine", deposit=5.0)
+    whole = dataclasses.replace(base, settled_fraction=1.0)
+    spec, whole_spec = runs.resolve(base), runs.resolve(whole)
+    default = MeasureOptions.settled_fraction
+    assert spec.measure_options.settled_fraction == default
+    assert spec.config_dict()["settled_fraction"] == default
+    assert whole_spec.config_dict()["settled_fraction"] == 1.0
+    assert grid.LATER_CONFIG_FIELDS["settled_fraction"] == default
+    assert grid.sweep_hash(spec, ["vbar"], base) != grid.sweep_hash(whole_spec, ["vbar"], whole)
+    with pytest.raises(runs.RunInputError, match=r"^--settled-fraction"):
+        runs.resolve(dataclasses.replace(base, settled_fraction=0.0))
+
+
 def test_a_committed_sweep_keeps_its_hash() -> None:
     """The sweep recorded in benchmarks/results/kappa_phase resolves today to the hash in
     its rows, so ``cnt-sim sweep`` resumes it: an option added to the run config since

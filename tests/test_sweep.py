@@ -364,3 +364,54 @@ def test_sweep_csv_with_random_bytes_is_a_clear_error(tmp_path: Path, fake_point
     code, stdout, stderr = _call([*argv, "--no-plots"])
     _clean(code, stdout, stderr, 2, "--out", "UTF-8")
     assert fake_points == [] and out.read_bytes() == before
+
+
+def test_a_row_carries_the_settled_measures_that_decide_the_class(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The serpentine classes are decided on the settled pattern (patterns.classify): its
+    CVs and loop events are columns of the CSV; a coil, which has none, leaves NaN."""
+    from types import SimpleNamespace
+
+    from cnt_env import runs
+
+    spec = runs.resolve_run("coil", groups={"Hbar": 30.0}, deposit=6.0, transient=0.0)
+    point = sweep.SweepPoint(0, (("Ibar", 100.0),), spec, "h", None)
+    measure = {"amplitude_cv": 0.3, "wavelength_cv": 0.2, "settled_amplitude_cv": 0.04,
+               "settled_wavelength_cv": 0.05, "settled_loop_events": 2}  # fmt: skip
+    report = {"measure": measure, "pattern": "periodic", "amplitude": 30.0,
+              "wavelength": 7.0, "coil_radius": None, "deposited_length": 6.0,
+              "sim_time": 1.0, "steps": 3, "newton_iterations": 9, "wall_time_s": 0.1}  # fmt: skip
+    outcome = SimpleNamespace(trace=None, stats=None, measurement=measure, report=lambda: report)
+    monkeypatch.setattr(runs, "simulate", lambda _spec: outcome)
+    row = sweep.run_point(point)
+    assert (row["settled_amplitude_cv"], row["settled_wavelength_cv"]) == (0.04, 0.05)
+    assert row["settled_loop_events"] == 2 and row["amplitude_cv"] == 0.3
+    report["measure"] = {}  # a coil's measure: no U-turn statistics
+    row = sweep.run_point(point)
+    assert all(math.isnan(row[c]) for c in sweep.LATER_RESULT_COLUMNS)
+
+
+def test_a_csv_from_before_the_settled_columns_resumes(tmp_path: Path, fake_points: list) -> None:
+    """A sweep CSV written before the settled-pattern columns is resumed with its own
+    header (a warning names them); a header with a column no sweep writes is refused."""
+    out = tmp_path / "s.csv"
+    argv = ["sweep", *TINY, "--param", "Ibar", "--values", "100", "--out", str(out), "--no-plots"]
+    assert _call([*argv, "--json"])[0] == 0
+    header, _ = sweep.read_rows(out)
+    assert header is not None
+    keep = [i for i, c in enumerate(header) if c not in sweep.LATER_RESULT_COLUMNS]
+    lines = [line.split(",") for line in out.read_text().splitlines()]
+    out.write_text("".join(",".join(line[i] for i in keep) + "\n" for line in lines))
+    fake_points.clear()
+    grown = ["sweep", *TINY, "--param", "Ibar", "--values", "100,200", "--out", str(out)]
+    code, _, stderr = _call([*grown, "--no-plots", "--json"])
+    assert code == 0, stderr
+    assert fake_points == [{"Ibar": 200.0}]  # the old row counts as done
+    assert "predates the columns" in stderr and "settled_amplitude_cv" in stderr
+    header2, rows = sweep.read_rows(out)
+    assert header2 == [header[i] for i in keep] and len(rows) == 2
+
+    out.write_text(out.read_text().replace("config_hash", "config_hash,extra", 1))
+    code, stdout, stderr = _call([*grown, "--no-plots", "--json"])
+    _clean(code, stdout, stderr, 2, "--out", "different sweep")

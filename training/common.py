@@ -14,7 +14,14 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from cnt_env.cli.common import double_dash_option
+from cnt_env.cli.common import (
+    csv_list,
+    double_dash_option,
+    positive_float,
+    positive_int,
+    seed_int,
+    seed_list,
+)
 from cnt_env.task import routes, settings
 from cnt_env.task import targets as targets_mod
 from policies.residual import (
@@ -112,35 +119,6 @@ def check_run_config(config: dict[str, Any]) -> None:
             raise ValueError(f"{key} must be a positive integer, got {value!r}")
 
 
-def positive_int(text: str) -> int:
-    """argparse type: an integer ≥ 1."""
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
-
-
-def seed_int(text: str) -> int:
-    """argparse type: a seed, an integer ≥ 0 (gymnasium and numpy refuse negative seeds)."""
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a seed must be ≥ 0, got {text}")
-    return value
-
-
-def csv_list(text: str) -> list[str]:
-    """The items of a comma-separated list, stripped, empty items dropped."""
-    return [x.strip() for x in text.split(",") if x.strip()]
-
-
-def seed_list(text: str) -> list[int]:
-    """argparse type: comma-separated episode seeds (each ≥ 0), at least one."""
-    seeds = [seed_int(x) for x in csv_list(text)]
-    if not seeds:
-        raise argparse.ArgumentTypeError("give at least one seed")
-    return seeds
-
-
 def held_out_targets(text: str, names: Sequence[str]) -> list[str]:
     """The held-out targets ``text`` names (comma separated, or ``all``: every one of
     ``names``); ValueError naming any that is not one of ``names``."""
@@ -150,14 +128,6 @@ def held_out_targets(text: str, names: Sequence[str]) -> list[str]:
         raise ValueError(f"{unknown or 'none given'}: not held-out targets of this task; "
                          f"choose from {list(names)} or all")  # fmt: skip
     return targets
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0 (a time, a budget)."""
-    value = float(text)
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
 
 
 def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:

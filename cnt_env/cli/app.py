@@ -33,6 +33,7 @@ from cnt_env.cli.common import (
     EXIT_USAGE,
     PROG,
     CliError,
+    add_settled_argument,
     double_dash_option,
     package_version,
     print_json,
@@ -146,6 +147,7 @@ def build_parser(run_defaults: Mapping[str, Any] | None = None) -> argparse.Argu
         metavar="L",
         help="start-up arc length dropped, L_vb (default: the run's)",
     )
+    add_settled_argument(measure)
     measure.add_argument("--png", metavar="FIG.png", help="plot the trace")
     measure.add_argument(
         "--json", action="store_true", help="print one JSON object on stdout and nothing else"

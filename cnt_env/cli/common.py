@@ -71,10 +71,19 @@ __all__ = [
     "add_group_arguments",
     "add_limit_arguments",
     "add_model_arguments",
+    "add_settled_argument",
+    "csv_list",
+    "float_list",
+    "int_list",
+    "name_list",
     "package_version",
+    "positive_float",
+    "positive_int",
     "print_json",
     "progress_bar",
     "require_rerun",
+    "seed_int",
+    "seed_list",
     "warn",
 ]
 
@@ -116,6 +125,81 @@ def double_dash_option(
 
 def warn(message: str) -> None:
     print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+
+# argparse types shared by cnt-sim, the training CLIs and the benchmarks: a bad value
+# is one line naming the flag (argparse adds it), never a traceback.
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer ≥ 1."""
+    value = _number(int, text, "an integer")
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (a time, a budget)."""
+    value = _number(float, text, "a number")
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def seed_int(text: str) -> int:
+    """argparse type: a seed, an integer ≥ 0 (gymnasium and numpy refuse negative seeds)."""
+    value = _number(int, text, "an integer")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed must be ≥ 0, got {text}")
+    return value
+
+
+def csv_list(text: str) -> list[str]:
+    """The items of a comma-separated list, stripped, empty items dropped."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def name_list(text: str) -> list[str]:
+    """argparse type: comma-separated names, at least one."""
+    names = csv_list(text)
+    if not names:
+        raise argparse.ArgumentTypeError("give at least one name (comma separated)")
+    return names
+
+
+def seed_list(text: str) -> list[int]:
+    """argparse type: comma-separated seeds (each ≥ 0), at least one."""
+    seeds = [seed_int(x) for x in csv_list(text)]
+    if not seeds:
+        raise argparse.ArgumentTypeError("give at least one seed")
+    return seeds
+
+
+def int_list(text: str) -> list[int]:
+    """argparse type: comma-separated integers ≥ 1 (sizes, counts), at least one."""
+    values = [positive_int(x) for x in csv_list(text)]
+    if not values:
+        raise argparse.ArgumentTypeError("give at least one integer (comma separated)")
+    return values
+
+
+def float_list(text: str) -> list[float]:
+    """argparse type: comma-separated finite numbers, at least one."""
+    values = [_number(float, x, "a number") for x in csv_list(text)]
+    if not values:
+        raise argparse.ArgumentTypeError("give at least one number (comma separated)")
+    bad = [x for x in values if not math.isfinite(x)]
+    if bad:
+        raise argparse.ArgumentTypeError(f"numbers must be finite, got {bad[0]}")
+    return values
+
+
+def _number(kind: Callable[[str], Any], text: str, what: str) -> Any:
+    try:
+        return kind(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text.strip()[:40]!r} is not {what}") from None
 
 
 def print_json(result: Mapping[str, Any]) -> None:
@@ -248,6 +332,20 @@ def add_model_arguments(m: Any) -> None:
         type=float,
         metavar="R",
         help="radius of the start-up contact arc, L_vb (default: 6.4 flat, 3.9 stepped)",
+    )
+
+
+def add_settled_argument(g: Any) -> None:
+    """``--settled-fraction``, shared by ``run``, ``measure`` and ``sweep``."""
+    from cnt_env.patterns import MeasureOptions
+
+    g.add_argument(
+        "--settled-fraction",
+        type=float,
+        metavar="F",
+        help="the last fraction of the U-turns on which periodic, irregular and "
+        "serpentine-coil are judged, in (0, 1] (default: the run's, else "
+        f"{MeasureOptions.settled_fraction:g}; 1 judges the whole measured trace)",
     )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -24,6 +25,7 @@ from cnt_env.cli.common import (
     add_group_arguments,
     add_limit_arguments,
     add_model_arguments,
+    add_settled_argument,
     print_json,
     progress_bar,
     require_rerun,
@@ -43,6 +45,7 @@ def run_options(args: argparse.Namespace) -> runs.RunOptions:
         deposit=args.deposit,
         seed=args.seed,
         transient=args.transient,
+        settled_fraction=args.settled_fraction,
         dt=args.dt,
         drag_law=args.drag_law,
         sliding=args.sliding,
@@ -63,7 +66,7 @@ def run_options(args: argparse.Namespace) -> runs.RunOptions:
 
 def _flag_hint(message: str) -> str:
     """A measurement message with its Python option names replaced by the CLI flag."""
-    return message.replace("MeasureOptions.transient_length", "--transient")
+    return re.sub(r"MeasureOptions\.(\w+)", lambda m: runs.FLAGS.get(m[1], m[0]), message)
 
 
 def argv_of(args: argparse.Namespace) -> list[str]:
@@ -212,7 +215,10 @@ def _measure(args: argparse.Namespace, outputs: OutputSet) -> int:
         raise CliError(str(exc)) from exc
     config, params = saved["config"], saved["params"]
     transient = config.get("transient_length") if args.transient is None else args.transient
-    options = runs.measure_options_for(transient)
+    settled = args.settled_fraction
+    if settled is None:
+        settled = config.get("settled_fraction")  # None in a trace from before the flag
+    options = runs.measure_options_for(transient, settled)
     substrate = config.get("substrate") if config.get("substrate") in runs.SUBSTRATES else "flat"
     measurement = runs.measure(saved["trace"], options, substrate, params.get("phi") or 0.0)
     result = runs.result_dict(measurement, saved["stats"], params, config)
@@ -227,6 +233,7 @@ def _measure(args: argparse.Namespace, outputs: OutputSet) -> int:
             "argv": argv_of(args),
             "source": str(args.trace),
             "transient_length": options.transient_length,
+            "settled_fraction": options.settled_fraction,
             "params": params,
             "config": config,
         }
@@ -257,6 +264,7 @@ CONFIG_KEYS: dict[str, str] = {
     "preset": "preset", "substrate": "substrate", "seed": "seed", "dt": "dt",
     "deposit": "deposit", "deposit_length": "deposit",
     "transient": "transient", "transient_length": "transient",
+    "settled_fraction": "settled_fraction",
     "drag_law": "drag_law", "sliding": "sliding", "friction": "friction",
     "coarse_delta": "coarse_delta",
     "fine_length": "fine_length", "contact_mode": "contact_mode",
@@ -358,6 +366,7 @@ def add_run_arguments(run: argparse.ArgumentParser) -> None:
         + ", ".join(f"{k} {v:g}" for k, v in RUN_TRANSIENT.items())
         + ")",
     )
+    add_settled_argument(m)
 
     add_limit_arguments(run.add_argument_group("limits (docs/cli.md)"))
 

@@ -22,6 +22,7 @@ from cnt_env.cli.common import (
     add_group_arguments,
     add_limit_arguments,
     add_model_arguments,
+    add_settled_argument,
     package_version,
     print_json,
     warn,
@@ -221,6 +222,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     add_model_arguments(m)
     m.add_argument("--transient", type=float, metavar="L", help="arc dropped before measuring")
+    add_settled_argument(m)
 
     x = p.add_argument_group("execution")
     x.add_argument(

@@ -43,6 +43,7 @@ from cnt_env.runs import RunInputError
 from cnt_env.sweep.grid import (
     BACKENDS,
     DEFAULT_OUT,
+    LATER_RESULT_COLUMNS,
     MAX_POINTS,
     MAX_POINTS_CEILING,
     RESULT_COLUMNS,
@@ -64,6 +65,7 @@ from cnt_env.sweep.store import CsvSink, finished_rows, read_rows
 __all__ = [
     "BACKENDS",
     "DEFAULT_OUT",
+    "LATER_RESULT_COLUMNS",
     "MAX_POINTS",
     "MAX_POINTS_CEILING",
     "PATTERN_COLORS",
@@ -134,9 +136,10 @@ def run_point(point: SweepPoint) -> dict[str, Any]:
         row[key] = result[key]
     for key in ("sim_time", "steps", "newton_iterations", "wall_time_s"):
         row[key] = result[key]
-    for key in ("peak_to_peak", "n_uturns", "n_loops", "n_cycles", "amplitude_cv"):
+    measured = ("peak_to_peak", "n_uturns", "n_loops", "n_cycles", "amplitude_cv",
+                "wavelength_cv", *sorted(LATER_RESULT_COLUMNS))  # fmt: skip
+    for key in measured:  # NaN where the pattern has no such measure (a coil's CVs)
         row[key] = m.get(key, math.nan)
-    row["wavelength_cv"] = m.get("wavelength_cv", math.nan)
     for key in ("amplitude", "wavelength"):
         lo, hi = m.get(f"{key}_spread", (math.nan, math.nan))
         row[f"{key}_p16"], row[f"{key}_p84"] = lo, hi

@@ -18,6 +18,7 @@ import numpy as np
 
 from cnt_env import runs, units
 from cnt_env.io import OutputError, check_output_path, config_hash, package_version
+from cnt_env.patterns import MeasureOptions
 
 #: Groups a sweep can vary: every field of DimensionlessParams.
 SWEEPABLE: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(units.DimensionlessParams))
@@ -34,6 +35,9 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "n_cycles",
     "amplitude_cv",
     "wavelength_cv",
+    "settled_amplitude_cv",
+    "settled_wavelength_cv",
+    "settled_loop_events",
     "amplitude_p16",
     "amplitude_p84",
     "wavelength_p16",
@@ -44,6 +48,12 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "newton_iterations",
     "wall_time_s",
     "failure",
+)
+#: Result columns added after sweep CSVs were first written (the serpentine classes'
+#: settled-pattern measures, patterns.classify). A CSV whose header lacks only these is
+#: resumed with its own header (store.CsvSink), so its new rows leave them out.
+LATER_RESULT_COLUMNS: frozenset[str] = frozenset(
+    {"settled_amplitude_cv", "settled_wavelength_cv", "settled_loop_events"}
 )
 DEFAULT_OUT = "sweep.csv"
 BACKENDS = ("local", "ray")
@@ -216,7 +226,10 @@ def point_options(
 
 #: Run-config fields added after sweeps were recorded, and their defaults: a field at its
 #: default is left out of the hash, so that a sweep recorded before it existed resumes.
-LATER_CONFIG_FIELDS: dict[str, Any] = {"friction": 0.0}
+LATER_CONFIG_FIELDS: dict[str, Any] = {
+    "friction": 0.0,
+    "settled_fraction": MeasureOptions.settled_fraction,
+}
 
 
 def sweep_hash(spec: runs.RunSpec, swept: Sequence[str], base: runs.RunOptions) -> str:

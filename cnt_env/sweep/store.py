@@ -19,9 +19,11 @@ from typing import Any
 import numpy as np
 
 from cnt_env.runs import RunInputError
-from cnt_env.sweep.grid import point_key
+from cnt_env.sweep.grid import LATER_RESULT_COLUMNS, point_key
 
-_INT_COLUMNS = frozenset({"seed", "n_uturns", "n_loops", "n_cycles", "steps", "newton_iterations"})
+_INT_COLUMNS = frozenset(
+    {"seed", "n_uturns", "n_loops", "n_cycles", "settled_loop_events", "steps", "newton_iterations"}
+)
 _TEXT_COLUMNS = frozenset({"pattern", "failure", "config_hash"})
 #: Largest sweep CSV read back (bytes): a bigger file is not one this tool wrote.
 MAX_CSV_BYTES = 1 << 30
@@ -133,11 +135,18 @@ class CsvSink:
         self.path = path
         content = scan(path)
         header = content.header
-        if header is not None and set(header) != set(columns):
+        missing = [] if header is None else [c for c in columns if c not in header]
+        if header is not None and (
+            set(header) - set(columns) or not set(missing) <= LATER_RESULT_COLUMNS
+        ):
             raise RunInputError(
                 f"--out {path} holds a different sweep (columns {', '.join(header)[:300]}); "
                 "pass another --out or remove it"
             )
+        if missing and warn is not None:
+            # written before those result columns existed: resumed with its own header
+            warn(f"--out {path} predates the columns {', '.join(missing)}; its new rows "
+                 "leave them out too (pass another --out to have them)")  # fmt: skip
         self.columns = list(header or columns)
         try:
             if header is not None and content.good_end < content.size:
