@@ -13,6 +13,11 @@ mishandle shows up.
 
     python benchmarks/route_breadth.py --seeds 0,1 --jobs 2 \
         --out benchmarks/results/route_breadth.json
+
+``--write-routes FILE`` writes the seven routes as a route file (nothing is run), so that
+``cnt-evaluate --route-file FILE`` scores every baseline on them, the constant-flow
+oracle and random included; ``benchmarks/results/breadth_routes.json`` is that file
+(a test keeps it equal to :func:`routes`).
 """
 
 from __future__ import annotations
@@ -63,7 +68,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", type=Path, default=ROOT / "training/configs/eval.yml")
     ap.add_argument("--model", type=Path, default=ROOT / "policies/pretrained/ppo_residual.zip")
     ap.add_argument("--out", type=Path, default=None, help="write the rows here (JSON)")
+    ap.add_argument("--write-routes", type=Path, default=None,
+                    help="write the routes as a cnt-evaluate --route-file and stop")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.write_routes is not None:
+        lines = ",\n".join(f" {json.dumps(r)}" for r in routes().values())
+        args.write_routes.write_text(f"[\n{lines}\n]\n")  # a route per line
+        return 0
     env_kwargs, max_steps = env_settings(load_config(args.config))
     policies = {"scripted": {"kind": "scripted"},
                 "ppo_residual": {"kind": "ppo_residual", "model": str(args.model)}}  # fmt: skip

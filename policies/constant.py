@@ -73,13 +73,16 @@ def search(
     weights: Sequence[float] = THIN_WEIGHTS,
     score: str = "thin",
     step_limits: Mapping[str, int] | None = None,
+    route_of: Mapping[str, routes.Route] | None = None,
 ) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Best flow per target by mean offline score over seeds.
 
     ``score``: the env's score mode; "thin" scores held-out targets
     (:func:`~cnt_env.task.scoring.score_trace`), "corridor" held-out routes
     (:func:`~cnt_env.task.scoring.score_route_trace`), each cut at its episode length
-    ``step_limits[name]`` (control steps; ``env.episode_steps_for(route)``).
+    ``step_limits[name]`` (control steps; ``env.episode_steps_for(route)``);
+    ``route_of[name]``, when given, is the route of that name (``cnt-evaluate
+    --route-file``).
 
     Returns ``(best, rows)``: ``best[target] = {"vbar", "phi", "score"}`` and one row
     per (target, flow) with the mean score terms."""
@@ -91,7 +94,7 @@ def search(
     best: dict[str, dict[str, Any]] = {}
     for name in target_names:
         if score == "corridor":
-            route = routes.held_out(name)
+            route = route_of[name] if route_of and name in route_of else routes.held_out(name)
             limit = (step_limits or {}).get(name)
 
             def one(t: ConstantTrace, route=route, limit=limit) -> dict[str, float]:

@@ -4,6 +4,7 @@ the held-out set, and what reset(options={"target": ...}) accepts."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -320,3 +321,72 @@ def test_segment_distance_and_crossing_against_closed_forms() -> None:
     assert segment_distance(a([0, 0]), a([1, 0]), a([4, 0]), a([6, 0])) == pytest.approx(3.0)
     # a degenerate segment (a point) to a segment: the point's distance
     assert segment_distance(a([3, 4]), a([3, 4]), a([0, 0]), a([0, -5])) == pytest.approx(5.0)
+
+
+def test_a_route_file_reads_named_routes_in_json_and_yaml(tmp_path) -> None:
+    """cnt-evaluate --route-file: a JSON list of named route dicts or a YAML mapping
+    {name: route dict}; each route as reset builds it (moved to start at the origin)."""
+    import json
+
+    from cnt_env.task import routes as R
+
+    route = {"name": "jog", "waypoints": [[5, 5], [65, 5], [65, 45]], "width": 16.0,
+             "keepouts": [{"rect": [80, 10, 90, 30]}]}  # fmt: skip
+    (tmp_path / "r.json").write_text(json.dumps([route]))
+    yml = "jog:\n  waypoints: [[5, 5], [65, 5], [65, 45]]\n  width: 16.0\n"
+    (tmp_path / "r.yml").write_text(yml + "  keepouts: [{rect: [80, 10, 90, 30]}]\n")
+    for name in ("r.json", "r.yml"):
+        got = R.load_file(tmp_path / name)
+        assert list(got) == ["jog"]
+        r = got["jog"]
+        assert r.name == "jog" and r.width == 16.0
+        assert np.array_equal(r.waypoints, [[0, 0], [60, 0], [60, 40]])
+        assert np.array_equal(r.keepouts[0].min(axis=0), [75, 5])
+        assert R.resolve(r.to_dict(), np.random.default_rng(0)).name == "jog"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[", "not valid"),
+        ("[]", "holds no route"),
+        ('"u_turn"', "a list of route dicts"),
+        ('[{"waypoints": [[0, 0], [9, 0]]}]', "give every route a 'name'"),
+        ('[{"name": "u_turn", "waypoints": [[0, 0], [9, 0]]}]', "held-out route's name"),
+        (
+            '[{"name": "a", "waypoints": [[0, 0], [9, 0]]}, {"name": "a", "waypoints": [[0, 0], '
+            "[0, 9]]}]",
+            "used twice",
+        ),
+        (
+            '{"a": {"waypoints": [[0, 0], [40, 0]], "keepouts": [{"rect": [10, -5, 20, 5]}]}}',
+            "route 0 ('a'): leg 0",
+        ),
+        ('{"a": {"waypoints": [[0, 0]]}}', "route 0 ('a')"),
+        ('{"a": [[0, 0], [9, 0]]}', "a route is a dict"),
+    ],
+)
+def test_a_bad_route_file_names_the_file_and_the_route(tmp_path, text, message) -> None:
+    from cnt_env.task import routes as R
+
+    path = tmp_path / "routes.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=re.escape(message)) as exc:
+        R.load_file(path)
+    assert str(path) in str(exc.value)
+
+
+def test_the_committed_breadth_route_file_holds_route_breadths_routes() -> None:
+    """benchmarks/results/breadth_routes.json (cnt-evaluate --route-file) is what
+    ``route_breadth.py --write-routes`` writes: the seven breadth routes, unchanged."""
+    from pathlib import Path
+
+    from benchmarks.route_breadth import routes as breadth
+    from cnt_env.task import routes as R
+
+    path = Path(__file__).parents[1] / "benchmarks/results/breadth_routes.json"
+    loaded = R.load_file(path)
+    designed = breadth()
+    assert list(loaded) == list(designed)
+    for name, spec in designed.items():
+        assert loaded[name].to_dict() == R.from_dict(spec).to_dict()

@@ -87,7 +87,8 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
     assert {r["policy"] for r in rows} == set(ALL_POLICIES)
     assert {"score_mean", "score_std", "coverage_mean", "normalized_score"} <= set(rows[0])
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert set(summary) == {"policies", "targets", "seeds"}
+    assert set(summary) == {"policies", "targets", "seeds", "custom_routes"}
+    assert summary["custom_routes"] == {}
     assert summary["targets"] == ["u_turn"] and summary["seeds"] == [0, 1, 2]
     for p in ALL_POLICIES:
         s = summary["policies"][p]
@@ -146,6 +147,36 @@ def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
     assert set(overall) == {"random", "scripted"}
     for r in overall.values():
         assert 0.0 <= r["score_mean"] <= 1.0
+
+
+def test_evaluate_on_routes_of_a_route_file(tmp_path: Path) -> None:
+    """cnt-evaluate --route-file: every baseline, the constant-flow oracle included, on a
+    user's own route, with the route's corridor and keep-out, next to a held-out one."""
+    from training.evaluate import main
+
+    route = {"name": "my_jog", "waypoints": [[0, 0], [30, 0], [30, 25]], "width": 14.0,
+             "keepouts": [{"rect": [40, -5, 50, 5]}]}  # fmt: skip
+    (tmp_path / "routes.json").write_text(json.dumps([route]))
+    (tmp_path / "small.yml").write_text(
+        "CNTDeposit-v0:\n  env_kwargs: " + json.dumps({**SMALL, "max_episode_steps": 3}) + "\n"
+    )
+    out = tmp_path / "out"
+    assert main(["--policies", "random,constant,scripted", "--route-file",
+                 str(tmp_path / "routes.json"), "--targets", "my_jog,u_turn", "--seeds", "0",
+                 "--config", str(tmp_path / "small.yml"), "--jobs", "2",
+                 "--out", str(out)]) == 0  # fmt: skip
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["targets"] == ["my_jog", "u_turn"]
+    assert list(summary["custom_routes"]) == ["my_jog"]
+    assert summary["custom_routes"]["my_jog"]["width"] == 14.0
+    with (out / "episodes.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert {(r["policy"], r["target"]) for r in rows} == {
+        (p, t) for p in ("random", "constant", "scripted") for t in ("my_jog", "u_turn")
+    }
+    best = json.loads((out / "constant_best.json").read_text())["best"]
+    assert set(best) == {"my_jog", "u_turn"}
+    assert (out / "traces_my_jog.png").is_file()
 
 
 def test_episode_frame_is_relative_to_the_contact_at_reset() -> None:
@@ -773,6 +804,13 @@ def test_an_option_given_double_dash_is_a_usage_error(
         ("training.demo", ["--jobs", "0"], "--jobs: must be a positive integer"),
         ("training.evaluate", ["--jobs", "0"], "--jobs: must be a positive integer"),
         ("training.evaluate", ["--config", "{tmp}/bad.yml"], "--config: the config"),
+        ("training.evaluate", ["--route-file", "{tmp}/bad.yml"], "--route-file: "),
+        ("training.evaluate", ["--route-file", "{tmp}/missing.json"], "cannot be read"),
+        (
+            "training.evaluate",
+            ["--route-file", "{tmp}/routes.json", "--targets", "nosuch"],
+            "['nosuch']: not held-out",
+        ),
     ],
 )
 def test_bad_training_input_is_a_usage_error_that_makes_nothing(
@@ -789,6 +827,7 @@ def test_bad_training_input_is_a_usage_error_that_makes_nothing(
     (tmp_path / "bad.zip").write_bytes(b"not a zip")  # its .yml is bad.yml
     (tmp_path / "list.yml").write_text("- a\n")
     (tmp_path / "zero.yml").write_text("CNTDeposit-v0: {n_timesteps: 0}\n")
+    (tmp_path / "routes.json").write_text('{"a": {"waypoints": [[0, 0], [30, 0]]}}')
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)

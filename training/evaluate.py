@@ -1,13 +1,15 @@
 """Evaluate every policy on the held-out targets (``cnt-evaluate``).
 
     cnt-evaluate [--policies random,constant,scripted,ppo,sac] [--targets all]
+                 [--route-file FILE]
                  [--seeds 0,1,2] [--models policies/pretrained] [--runs DIR ...]
                  [--config training/configs/eval.yml] [--constant-from FILE]
                  [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
                  [--video DIR [--video-format mp4|gif]] [--trust]
                  [--reuse DIR ... [--redo POLICIES]]
 
-For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 with the
+For every (policy, held-out target, seed) it runs one episode of CNTDeposit-v0 (the
+targets may also be routes of your own, ``--route-file``: docs/task.md) with the
 env settings of ``--config`` (by default ``eval.yml``: the env's default physics, the
 model; a training config gives the fast surrogate the agents were trained on) and
 writes, in ``--out``:
@@ -20,7 +22,8 @@ writes, in ``--out``:
   per seed, the mean over targets, then mean ± std over seeds;
 * ``results.md``: the same as Markdown tables (for the README);
 * ``summary.json``: ``{"policies": {name: {"score_mean", "score_std"}}, "targets",
-  "seeds"}`` (the ``ALL`` rows);
+  "seeds", "custom_routes"}`` (the ``ALL`` rows; the routes evaluated from
+  ``--route-file``, in the dict format);
 * ``constant_grid.csv`` and ``constant_best.json``: the constant-flow grid search
   (policies/constant.py), unless ``--constant-from`` gives a previous ``constant_best.json``;
 * ``traces_<target>.png`` (and ``traces.png``, all targets): the trace laid by each
@@ -48,7 +51,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -152,7 +155,8 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
         env = EpisodeSaver(env, job["save_dir"], tag=f"{job['policy']}-{job['target']}")
     policy = _make_policy(job["spec"], env)
     t0 = time.perf_counter()
-    obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
+    # a route of --route-file travels as its dict; a held-out one by name
+    obs, info = env.reset(seed=job["seed"], options={"target": job.get("route") or job["target"]})
     policy.reset(job["seed"])
     steps, ret, info = _play(env, policy, obs)
     base = env.unwrapped
@@ -191,9 +195,13 @@ def _record_constant(args: tuple) -> Any:
         env.close()
 
 
-def constant_search(env_kwargs, max_steps, targets, pool, out: Path) -> dict[str, dict]:
+def constant_search(
+    env_kwargs, max_steps, targets, pool, out: Path,
+    route_of: Mapping[str, routes.Route] | None = None,
+) -> dict[str, dict]:  # fmt: skip
     """Best constant flow per target (policies/constant.py); writes the grid and the
-    choice to ``out``."""
+    choice to ``out``. ``route_of``: the routes of the corridor task by name (default: the
+    held-out routes)."""
     from policies.constant import grid, search
 
     env = make_env(env_kwargs, max_steps)
@@ -203,13 +211,15 @@ def constant_search(env_kwargs, max_steps, targets, pool, out: Path) -> dict[str
     mode = base.score_mode
     limits = None
     if mode == "corridor":  # each route's own episode length (env.episode_steps_for)
-        limits = {t: min(max_steps, base.episode_steps_for(routes.held_out(t))) for t in targets}
+        route_of = route_of or {t: routes.held_out(t) for t in targets}
+        limits = {t: min(max_steps, base.episode_steps_for(route_of[t])) for t in targets}
         max_steps = max(limits.values())
     env.close()
     flows = grid(CONSTANT_SPEEDS, CONSTANT_DIRECTIONS)
     jobs = [(env_kwargs, max_steps, v, p, s) for v, p in flows for s in CONSTANT_SEARCH_SEEDS]
     traces = pool.map(_record_constant, jobs, chunksize=1)
-    best, rows = search(traces, targets, tol, weights, score=mode, step_limits=limits)
+    best, rows = search(traces, targets, tol, weights, score=mode, step_limits=limits,
+                        route_of=route_of)  # fmt: skip
     _write_csv(out / "constant_grid.csv", rows)
     meta = {"speeds": CONSTANT_SPEEDS, "n_directions": CONSTANT_DIRECTIONS,
             "search_seeds": CONSTANT_SEARCH_SEEDS, "max_episode_steps": max_steps,
@@ -590,12 +600,21 @@ def evaluate(
     trust: bool = False,
     video: Path | None = None,
     video_format: str = "mp4",
+    custom_routes: Mapping[str, routes.Route] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run the evaluation and write the tables and plots (module doc). Returns the table."""
+    """Run the evaluation and write the tables and plots (module doc). Returns the table.
+    ``custom_routes``: routes by name (``--route-file``, corridor task) that ``targets``
+    may name besides the held-out ones."""
     limit_threads()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     env_kwargs, max_steps = env_settings(config)
+    custom = dict(custom_routes or {})
+    route_of = None
+    if score_mode(env_kwargs) == "corridor":
+        route_of = {t: custom[t] if t in custom else routes.held_out(t) for t in targets}
+    elif custom:
+        raise ValueError("custom routes (--route-file) need the corridor task (score: corridor)")
     t0 = time.perf_counter()
     ctx = mp.get_context("forkserver")
     tmp = None
@@ -620,7 +639,7 @@ def evaluate(
                 if missing:
                     raise ValueError(f"{constant_from} has no constant flow for {missing}")
             else:
-                best = constant_search(env_kwargs, max_steps, targets, pool, out)
+                best = constant_search(env_kwargs, max_steps, targets, pool, out, route_of)
         t_search = time.perf_counter() - t0
         job_list = []
         for p in policies:
@@ -646,6 +665,7 @@ def evaluate(
                 for s in seeds:
                     job_list.append({
                         "policy": p, "spec": spec, "target": t, "seed": int(s),
+                        "route": custom[t].to_dict() if t in custom else None,
                         "env_kwargs": env_kwargs, "max_steps": max_steps,
                         "save_dir": str(save_episodes) if save_episodes else None,
                     })  # fmt: skip
@@ -672,12 +692,10 @@ def evaluate(
         },
         "targets": list(targets),
         "seeds": [int(s) for s in seeds],
+        "custom_routes": {t: custom[t].to_dict() for t in targets if t in custom},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
-    route_of = None
-    if score_mode(env_kwargs) == "corridor":
-        route_of = {t: routes.held_out(t) for t in targets}
     plot_traces(results, targets, out, route_of)
     if runs:
         plot_learning_curves(runs, out, rows)
@@ -750,9 +768,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--policies", default=",".join(ALL_POLICIES),
                    help="comma separated: random, constant, scripted, or a model name "
                         "<name> (--models/<name>.zip)")  # fmt: skip
-    p.add_argument("--targets", default="all",
-                   help="held-out names (routes, or thin targets with score: thin), comma "
-                        "separated, or all")  # fmt: skip
+    p.add_argument("--targets", default=None,
+                   help="held-out names (routes, or thin targets with score: thin) or "
+                        "names of --route-file, comma separated, or all (the held-out set) "
+                        "(default: the --route-file's routes if given, else all)")  # fmt: skip
+    p.add_argument("--route-file", type=Path, default=None,
+                   help="your own routes: a JSON or YAML list of route dicts with a name "
+                        "each, or a mapping {name: route dict} (docs/task.md)")  # fmt: skip
     p.add_argument("--seeds", type=seed_list, default="0,1,2",
                    help="comma separated episode seeds")  # fmt: skip
     p.add_argument("--config", type=Path, default=CONFIG_DIR / "eval.yml",
@@ -798,10 +820,23 @@ def main(argv: list[str] | None = None) -> int:
         env_kwargs, _ = env_settings(config)
     except ValueError as exc:
         parser.error(f"--config: {exc}")
-    try:
-        targets = held_out_targets(args.targets, held_out_names(env_kwargs))
-    except ValueError as exc:
-        parser.error(f"--targets: {exc}")
+    custom: dict[str, routes.Route] = {}
+    if args.route_file is not None:
+        if score_mode(env_kwargs) != "corridor":
+            parser.error("--route-file: routes need the corridor task (score: corridor)")
+        try:
+            custom = routes.load_file(args.route_file)
+        except ValueError as exc:
+            parser.error(f"--route-file: {exc}")
+    names = [*held_out_names(env_kwargs), *custom]
+    if args.targets is None:
+        targets = list(custom) or list(held_out_names(env_kwargs))
+    else:
+        try:
+            targets = (list(held_out_names(env_kwargs)) if args.targets == "all"
+                       else held_out_targets(args.targets, names))  # fmt: skip
+        except ValueError as exc:
+            parser.error(f"--targets: {exc}")
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
     print(f"results -> {out}")
     from policies.sb3 import UntrustedModelError
@@ -812,7 +847,7 @@ def main(argv: list[str] | None = None) -> int:
                  jobs=args.jobs, save_episodes=args.save_episodes, rrd=args.rrd,
                  reuse=args.reuse, redo=csv_list(args.redo),
                  trust=args.trust, video=args.video,
-                 video_format=args.video_format)  # fmt: skip
+                 video_format=args.video_format, custom_routes=custom)  # fmt: skip
     except (UntrustedModelError, FileNotFoundError) as exc:
         print(f"cnt-evaluate: error: {exc}", file=sys.stderr)
         return 2  # EXIT_USAGE (docs/cli.md)

@@ -53,9 +53,11 @@ means leaving the corridor).
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -79,6 +81,7 @@ __all__ = [
     "episode_steps",
     "families_of",
     "held_out",
+    "load_file",
     "rectangle",
     "resolve",
     "sample",
@@ -481,6 +484,60 @@ def from_dict(spec: Mapping[str, Any]) -> Route:
     return Route(pts - o, float(spec.get("width", DEFAULT_HALF_WIDTH)), pads - o,
                  tuple(keepouts), str(spec.get("name", "custom")),
                  dict(spec.get("params") or {}))  # fmt: skip
+
+
+#: Largest route file read (bytes): a route is a few hundred bytes.
+MAX_ROUTE_FILE_BYTES = 1 << 24
+
+
+def load_file(path: str | Path) -> dict[str, Route]:
+    """Named routes from a JSON or YAML file (``.yml``/``.yaml``; anything else is read as
+    JSON), for ``cnt-evaluate --route-file``: a list of route dicts (the format of
+    :func:`from_dict`), each with a ``name``, or a mapping ``{name: route dict}``.
+
+    Every route is validated as ``reset`` would; a name must be unique and may not be a
+    family or held-out name (it would be ambiguous). Raises ValueError naming the file
+    and the route on any problem; nothing is half-read."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_ROUTE_FILE_BYTES:
+            raise ValueError(f"{path}: over {MAX_ROUTE_FILE_BYTES} bytes, not a route file")
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot be read as text: {exc}") from exc
+    try:
+        if path.suffix.lower() in (".yml", ".yaml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+    except Exception as exc:  # a parser's own error type: reported with the file
+        raise ValueError(f"{path}: not valid {path.suffix or 'JSON'}: {exc}") from exc
+    if isinstance(data, Mapping):
+        items = [(str(k), v) for k, v in data.items()]
+    elif isinstance(data, list):
+        items = [(v.get("name") if isinstance(v, Mapping) else None, v) for v in data]
+    else:
+        raise ValueError(f"{path}: a route file holds a list of route dicts or a mapping "
+                         f"{{name: route dict}}, got {type(data).__name__}")  # fmt: skip
+    if not items:
+        raise ValueError(f"{path}: holds no route")
+    out: dict[str, Route] = {}
+    for i, (name, spec) in enumerate(items):
+        where = f"{path}: route {i}" + (f" ({name!r})" if name else "")
+        if not isinstance(spec, Mapping):
+            raise ValueError(f"{where}: a route is a dict with 'waypoints', got {spec!r:.80}")
+        if not name or not isinstance(name, str):
+            raise ValueError(f"{where}: give every route a 'name' (a non-empty string)")
+        if name in out or name in FAMILIES or name in HELD_OUT:
+            taken = "used twice" if name in out else "a family or held-out route's name"
+            raise ValueError(f"{where}: the name is {taken}; rename it")
+        try:
+            out[name] = from_dict({**spec, "name": name})
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{where}: {exc}") from exc
+    return out
 
 
 def resolve(spec: Any, rng: np.random.Generator, difficulty: float = DEFAULT_DIFFICULTY,
