@@ -193,6 +193,11 @@ for _eta in (10.0, 100.0):
     CANDIDATES[f"C_fine_friction{_eta:g}"] = dict(CANDIDATES["C_fine"], friction=_eta)
 # C_fine with deposited nodes held in x and z (no sliding): the limit of C as eta -> inf
 CANDIDATES["none_fine"] = dict(CANDIDATES["C_fine"], sliding="none")
+# C_fine with the critical-curvature rule's length fixed at the paper's delta ~ L_vb
+# instead of the edge's (substrate.Stepped.snap_length): the rule's window for a straight
+# edge, kappa_c l, is then the paper's on the model's finer mesh (RESULTS.md, issue 12,
+# "The snap rule's length")
+CANDIDATES["C_fine_snap1"] = dict(CANDIDATES["C_fine"], snap_length=1.0)
 
 SERP = "serpentine"
 COIL = "coil"

@@ -65,7 +65,8 @@ def test_zero_coefficients_add_nothing() -> None:
 @pytest.mark.parametrize(
     ("field", "value"),
     [("friction", -1.0), ("friction", float("nan")), ("snap", "teleport"),
-     ("snap_stiffness", 0.0), ("sliding", "D")],
+     ("snap_stiffness", 0.0), ("sliding", "D"), ("snap_length", 0.0),
+     ("snap_length", float("inf"))],
 )  # fmt: skip
 def test_bad_options_raise_naming_the_parameter(field: str, value) -> None:
     with pytest.raises(ValueError, match=field):
@@ -121,3 +122,22 @@ def test_no_sliding_fixes_deposited_nodes() -> None:
     sim.run(15.0)
     k = 4 * np.arange(sim.n_deposited)
     assert np.all(sim.rod.fixed[k] == 1) and np.all(sim.rod.fixed[k + 2] == 1)
+
+
+def test_the_snap_rule_takes_the_edge_length_or_a_fixed_snap_length() -> None:
+    """|e_x| < kappa_c l |e_z|: with l the edge's length (default) a straight edge 5 deg off
+    the steps is outside the window on a mesh of 0.2 (kappa_c delta = 0.04 rad) and inside
+    it on the paper's mesh of 1 (0.2 rad); snap_length = 1 gives the paper's window on
+    the fine mesh. The option reaches the simulator's substrate."""
+    from cnt_env.sim.substrate import _next_to_snap
+
+    psi = np.radians(5.0)
+    for delta, default_snaps in ((0.2, False), (1.0, True)):
+        q = np.zeros(4 * 3 - 1)
+        q[4], q[6] = delta * np.sin(psi), delta * np.cos(psi)  # edge 0, 5 deg off z
+        q[8], q[10] = q[4] + delta, q[6]  # edge 1 along x: never snaps
+        rest, snapped = np.full(2, delta), np.zeros(2, dtype=np.bool_)
+        assert (_next_to_snap(q, rest, snapped, 0, 2, 0.2, 0.0) == 0) is default_snaps
+        assert _next_to_snap(q, rest, snapped, 0, 2, 0.2, 1.0) == 0
+        assert _next_to_snap(q, rest, snapped, 0, 2, 0.2, 0.1) == -1
+    assert _small(snap_length=1.0).substrate.snap_length == 1.0

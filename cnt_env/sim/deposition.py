@@ -98,8 +98,8 @@ class DepositionConfig:
     ``"linear"`` or ``"printed"`` (forces.py). The substrate is flat and sticky when
     ``params.kappa_c_bar`` is None, stepped otherwise; ``sliding`` ("B", "C" or "none"),
     ``tail_length`` (L_vb of deposited arc kept in the solve; 195 = 25 um at the
-    serpentine preset), ``friction``, ``snap``, ``snap_stiffness`` and ``tail_clamp``
-    apply to the stepped one (substrate.Stepped documents each).
+    serpentine preset), ``friction``, ``snap``, ``snap_stiffness``, ``snap_length`` and
+    ``tail_clamp`` apply to the stepped one (substrate.Stepped documents each).
 
     Graded discretisation [choice, docs/model.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
@@ -136,6 +136,7 @@ class DepositionConfig:
     snap_stiffness: float = 1.0e4
     max_nodes: int = 200_000
     tail_clamp: str = MODEL["tail_clamp"]
+    snap_length: float | None = None
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=lambda: NewtonOptions(**NEWTON))
 
@@ -193,8 +194,9 @@ class DepositionConfig:
                 "you have the memory and time"
             )
         check_sliding_options(
-            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp
-        )
+            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp,
+            self.snap_length,
+        )  # fmt: skip
         if not (self.tail_length > 4 * p.delta_bar):
             raise ValueError(f"tail_length must exceed 4 delta_bar, got {self.tail_length!r}")
         if self.coarse_delta is not None and not (
@@ -281,6 +283,7 @@ class DepositionSim:
                 snap=config.snap,
                 snap_stiffness=config.snap_stiffness,
                 tail_clamp=config.tail_clamp,
+                snap_length=config.snap_length,
             )
         )
         self.delta = p.delta_bar

@@ -29,7 +29,12 @@ TAIL_CLAMP_OPTIONS = ("xyz", "xy")
 
 
 def check_sliding_options(
-    sliding: str, friction: float, snap: str, snap_stiffness: float, tail_clamp: str
+    sliding: str,
+    friction: float,
+    snap: str,
+    snap_stiffness: float,
+    tail_clamp: str,
+    snap_length: float | None = None,
 ) -> None:
     """Validate the stepped substrate's named options (raises ValueError naming the field);
     shared by :class:`Stepped` and ``DepositionConfig``."""
@@ -43,6 +48,8 @@ def check_sliding_options(
         raise ValueError(f"snap_stiffness must be finite and > 0, got {snap_stiffness!r}")
     if tail_clamp not in TAIL_CLAMP_OPTIONS:
         raise ValueError(f"tail_clamp must be one of {TAIL_CLAMP_OPTIONS}, got {tail_clamp!r}")
+    if snap_length is not None and not (math.isfinite(snap_length) and snap_length > 0):
+        raise ValueError(f"snap_length must be None or finite and > 0, got {snap_length!r}")
 
 
 @dataclass(frozen=True)
@@ -94,6 +101,12 @@ class Stepped:
     it is free under "C"), l_i its Voronoi length; 0 leaves only the gas drag. ``snap``
     is one of SNAP_OPTIONS; ``snap_stiffness`` (e_v / L_vb^2 per unit length) is the
     penalty spring's stiffness.
+
+    ``snap_length`` [choice]: the length l in the rule |e.x| < kappa_c l |e.z|. None
+    (default) is the edge's own length, the rule as the paper prints it with its delta ~
+    L_vb: on a finer mesh its window for a straight edge, kappa_c delta radians, narrows
+    with delta. A number fixes l (L_vb), so the window is the paper's at l = 1 whatever
+    the mesh (RESULTS.md, issue 12, "The snap rule's length").
     """
 
     kappa_c: float
@@ -106,6 +119,7 @@ class Stepped:
     snap: str = "jump"
     snap_stiffness: float = 1.0e4
     tail_clamp: str = "xyz"
+    snap_length: float | None = None
     name: str = "stepped"
     keep_deposited: int = 0  # not used: the tail is kept by arc length
 
@@ -115,8 +129,9 @@ class Stepped:
         if not (self.tail_length > 0):
             raise ValueError(f"tail_length must be > 0, got {self.tail_length!r}")
         check_sliding_options(
-            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp
-        )
+            self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp,
+            self.snap_length,
+        )  # fmt: skip
 
     def deposit(self, rod: Rod, node: int) -> None:
         i = 4 * node
@@ -140,7 +155,8 @@ class Stepped:
         count = 0
         j = 0
         while True:  # the scan for edges past the rule is compiled (_next_to_snap)
-            j = _next_to_snap(q, rod.rest_lengths, snapped, j, n_deposited - 1, self.kappa_c)
+            j = _next_to_snap(q, rod.rest_lengths, snapped, j, n_deposited - 1, self.kappa_c,
+                              self.snap_length or 0.0)  # fmt: skip
             if j < 0:
                 return count
             a, b = 4 * j, 4 * (j + 1)
@@ -193,13 +209,15 @@ class Stepped:
 
 @njit(cache=True)
 def _next_to_snap(q: np.ndarray, rest_lengths: np.ndarray, snapped: np.ndarray, j: int,
-                  end: int, kappa_c: float) -> int:  # fmt: skip
+                  end: int, kappa_c: float, snap_length: float) -> int:  # fmt: skip
     """The first edge j' in [j, end) not yet snapped whose direction is within the
-    critical-curvature rule, |e_x| < kappa_c l |e_z| (docs/model.md §4), or -1."""
+    critical-curvature rule, |e_x| < kappa_c l |e_z| (docs/model.md §5), or -1; l is
+    the edge's rest length, or ``snap_length`` when > 0."""
     while j < end:
         if not snapped[j]:
             a, b = 4 * j, 4 * (j + 1)
-            if abs(q[b] - q[a]) < kappa_c * rest_lengths[j] * abs(q[b + 2] - q[a + 2]):
+            ell = snap_length if snap_length > 0.0 else rest_lengths[j]
+            if abs(q[b] - q[a]) < kappa_c * ell * abs(q[b + 2] - q[a + 2]):
                 return j
         j += 1
     return -1
