@@ -54,6 +54,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import find_peaks
 
+from cnt_env.presets import SETTLED_FRACTION
+
 __all__ = [
     "LOOP_TURNING_TOLERANCE",
     "PATTERNS",
@@ -218,7 +220,7 @@ class MeasureOptions:
     uturn_prominence: float = 3.0
     periodic_cv_max: float = 0.10
     periodic_min_cycles: int = 10
-    settled_fraction: float = 0.5
+    settled_fraction: float = SETTLED_FRACTION
     serpentine_coil_loop_density: float = 0.2
     serpentine_coil_min_loops: int = 2
     min_judged_cycles: int = 3

@@ -154,6 +154,10 @@ RUN_DEPOSIT: MappingProxyType[str, float] = MappingProxyType({"coil": 1500.0, "s
 #: 12, "The coil's start-up"). The model lays a coil at 1500 / 900 at every point of the
 #: reproduction's coil rows (seed 0; other seeds not run). Serpentines settle after ~150.
 RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 900.0, "serpentine": 150.0})
+#: The last fraction of a serpentine's U-turns on which its class is judged
+#: (patterns.MeasureOptions.settled_fraction, ``--settled-fraction``): a start-up's decay
+#: over its first cycles is not irregularity (RESULTS.md, "Classes of the settled pattern").
+SETTLED_FRACTION: float = 0.5
 #: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
 DEMO_DEPOSIT: float = 300.0
 

@@ -230,9 +230,10 @@ def check_group_range(params: units.DimensionlessParams) -> None:
             )
 
 
-def estimated_nodes(config: DepositionConfig, deposit_length: float) -> int:
+def estimated_nodes(config: DepositionConfig, deposit_length: float) -> float:
     """Nodes a run needs: the start-up rod (arc and vertical part, docs/model.md §4) plus
-    the deposited trace at ``delta_bar``."""
+    the deposited trace at ``delta_bar`` (a float: inf when a huge ``--deposit`` over a
+    small delta overflows, which the node limit then refuses)."""
     p = config.params
     coarse = config.coarse_delta or p.delta_bar
     rod = (
@@ -240,7 +241,8 @@ def estimated_nodes(config: DepositionConfig, deposit_length: float) -> int:
         + min(config.fine_length, p.Hbar) / p.delta_bar
         + p.Hbar / coarse
     )
-    return int(rod + deposit_length / p.delta_bar) + 4
+    n = rod + deposit_length / p.delta_bar
+    return float(math.floor(n) + 4) if math.isfinite(n) else math.inf
 
 
 @dataclass(frozen=True)

@@ -381,6 +381,8 @@ def test_a_failed_run_keeps_the_old_outputs(tmp_path: Path, monkeypatch) -> None
         (["--delta", "1e-9"], ["--delta"]),
         (["--delta", "5e-324"], ["--delta", "meaningful range"]),  # coarse/delta overflowed
         (["--deposit", "1e12"], ["--max-nodes"]),
+        (["--deposit=3.595386269724632e+307"], ["--max-nodes"]),  # the node count overflowed
+        (["--coarse-delta=3.595386269724632e+307"], ["--coarse-delta", "longer than the rod"]),
         (["--Ibar", "1e300"], ["--Ibar", "meaningful range"]),  # defect 7
         (["--kappa-c", "0"], ["--kappa-c"]),  # defect 9
         (["--substrate", "flat", "--kappa-c", "0.2"], ["--kappa-c", "--substrate flat"]),

@@ -55,6 +55,10 @@ SLOW = settings.get_profile("cli-slow")
 #: CPU seconds one command may take (no simulation runs; imports are warm after the
 #: first). CPU time, not wall time, so that a busy machine cannot fail the test.
 MAX_CPU_SECONDS = 20.0
+#: CPU seconds a sweep may add per grid point it plans (each is validated as a run before
+#: any work: ~0.2 ms on this machine; a 1e6-point grid, which --max-points allows, plans in
+#: minutes, linear in what was asked, while a runaway is caught by the bound above).
+PLAN_CPU_SECONDS_PER_POINT = 1e-3
 #: Wall seconds, only to catch a command that blocks (a FIFO) rather than computes.
 MAX_WALL_SECONDS = 600.0
 ALLOWED_CODES = set(cli.EXIT_CODES) - {cli.EXIT_INTERNAL}
@@ -166,7 +170,11 @@ def _check_outcome(code: int, stdout: str, stderr: str, seconds: tuple[float, fl
         assert lines, "an error exit without a message"
         last = lines[-1]
         assert (last.startswith("cnt-sim") and "error:" in last) or "interrupted" in last, stderr
-    assert seconds[0] < MAX_CPU_SECONDS and seconds[1] < MAX_WALL_SECONDS, seconds
+    points = 0
+    if code == 0 and stdout.startswith("{"):  # a sweep's --json summary: the points planned
+        points = len(json.loads(stdout.splitlines()[0]).get("rows", ()))
+    budget = MAX_CPU_SECONDS + PLAN_CPU_SECONDS_PER_POINT * points
+    assert seconds[0] < budget and seconds[1] < MAX_WALL_SECONDS, (seconds, points)
 
 
 def _check_untouched(root: Path, before: dict[str, tuple], outputs: set[str]) -> None:

@@ -35,7 +35,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from cnt_env.io import package_version, to_jsonable
-from cnt_env.presets import MESH, MODEL
+from cnt_env.presets import MESH, MODEL, SETTLED_FRACTION
 from cnt_env.runs import ADHESION_MODELS, CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
 
 PROG = "cnt-sim"
@@ -337,15 +337,13 @@ def add_model_arguments(m: Any) -> None:
 
 def add_settled_argument(g: Any) -> None:
     """``--settled-fraction``, shared by ``run``, ``measure`` and ``sweep``."""
-    from cnt_env.patterns import MeasureOptions
-
     g.add_argument(
         "--settled-fraction",
         type=float,
         metavar="F",
         help="the last fraction of the U-turns on which periodic, irregular and "
         "serpentine-coil are judged, in (0, 1] (default: the run's, else "
-        f"{MeasureOptions.settled_fraction:g}; 1 judges the whole measured trace)",
+        f"{SETTLED_FRACTION:g}; 1 judges the whole measured trace)",
     )
 
 

@@ -199,14 +199,20 @@ class DepositionConfig:
         )  # fmt: skip
         if not (self.tail_length > 4 * p.delta_bar):
             raise ValueError(f"tail_length must exceed 4 delta_bar, got {self.tail_length!r}")
+        ratio = math.nan if self.coarse_delta is None else self.coarse_delta / p.delta_bar
         if self.coarse_delta is not None and not (
-            math.isfinite(self.coarse_delta)
+            math.isfinite(ratio)  # a huge coarse_delta over a small delta overflows to inf
             and self.coarse_delta >= p.delta_bar
-            and abs(self.coarse_delta / p.delta_bar - round(self.coarse_delta / p.delta_bar)) < 1e-9
+            and abs(ratio - round(ratio)) < 1e-9
         ):
             raise ValueError(
                 f"coarse_delta must be a whole multiple of delta_bar = {p.delta_bar}, got "
                 f"{self.coarse_delta!r}"
+            )
+        if self.coarse_delta is not None and self.coarse_delta > p.Hbar:
+            raise ValueError(
+                f"coarse_delta = {self.coarse_delta!r} is longer than the rod (Hbar = "
+                f"{p.Hbar:g}): an injected edge must fit under the top; use a few L_vb"
             )
         if not (math.isfinite(self.fine_length) and self.fine_length > 0):
             raise ValueError(f"fine_length must be finite and > 0, got {self.fine_length!r}")

@@ -18,7 +18,7 @@ import numpy as np
 
 from cnt_env import runs, units
 from cnt_env.io import OutputError, check_output_path, config_hash, package_version
-from cnt_env.patterns import MeasureOptions
+from cnt_env.presets import SETTLED_FRACTION
 
 #: Groups a sweep can vary: every field of DimensionlessParams.
 SWEEPABLE: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(units.DimensionlessParams))
@@ -228,7 +228,7 @@ def point_options(
 #: default is left out of the hash, so that a sweep recorded before it existed resumes.
 LATER_CONFIG_FIELDS: dict[str, Any] = {
     "friction": 0.0,
-    "settled_fraction": MeasureOptions.settled_fraction,
+    "settled_fraction": SETTLED_FRACTION,
 }
 
 
