@@ -902,3 +902,36 @@ def test_set_route_draw_changes_the_next_routes_and_refuses_bad_values() -> None
         with pytest.raises(ValueError):
             env.set_route_draw(**bad)
         assert env.families == ("arc",) and env.difficulty == 0.1
+
+
+def test_route_file_draws_your_own_routes(tmp_path) -> None:
+    """route_file: a reset without a target draws one of the file's routes with
+    np_random (the same seed, the same route); an explicit target still wins; a bad file
+    or the thin task is refused at construction."""
+    import json
+
+    from cnt_env.task.env import CNTDepositEnv
+
+    mine = {"jog": {"waypoints": [[0, 0], [30, 0], [30, 20]], "width": 15.0},
+            "run": {"waypoints": [[0, 0], [0, 40]]}}  # fmt: skip
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps(mine))
+    env = CNTDepositEnv(**{**SMALL, "score": "corridor", "route_file": str(path)})
+    names = []
+    for seed in range(8):
+        env.reset(seed=seed)
+        names.append(env.target.name)
+    assert set(names) == {"jog", "run"}
+    again = []
+    for seed in range(8):
+        env.reset(seed=seed)
+        again.append(env.target.name)
+    assert again == names
+    env.reset(seed=0, options={"target": "u_turn"})
+    assert env.target.name == "u_turn"
+    env.close()
+    path.write_text('[{"waypoints": [[0, 0], [9, 0]]}]')
+    with pytest.raises(ValueError, match="give every route a 'name'"):
+        CNTDepositEnv(**{**SMALL, "score": "corridor", "route_file": str(path)})
+    with pytest.raises(ValueError, match="route_file needs the route task"):
+        CNTDepositEnv(**SMALL, route_file=str(path))

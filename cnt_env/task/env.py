@@ -180,7 +180,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     (``cache_dir``, ``$CNT_ENV_CACHE_DIR`` or the user cache) and restored exactly at every
     reset; then a random advance in [0, ``reset_advance`` · ``control_interval``). The
     target is placed at the contact point: drawn from ``families`` at ``difficulty`` with
-    ``np_random``, or ``reset(options={"target": ...})``: a family or held-out name, a
+    ``np_random`` (or, with ``route_file``, one of that file's routes, uniformly), or
+    ``reset(options={"target": ...})``: a family or held-out name, a
     Route, a dict ``{"waypoints", "width", "pads", "keepouts", "name"}``, or an (n, 2)
     polyline (corridor ``route_width``). A bad target (say zero length) raises
     ``ValueError`` before anything changes.
@@ -225,6 +226,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `route_width`      | 18.5         | corridor half-width of bare polylines (L_vb)    |
     | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]      |
     | `families`         | all          | families drawn uniformly; repeat one to weight  |
+    | `route_file`       | None         | draw your own routes instead of `families`      |
+    |                    |              | (routes.load_file; JSON/YAML; docs/task.md)     |
     | `trace_window`     | 64 / None    | span of the observed trace points (L_vb)        |
     | `tolerance`        | 2.0          | thin: tolerance band τ_b (L_vb)                 |
     | `n_trace_points`   | 16           | K                                               |
@@ -310,6 +313,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         progress_weight: float = 0.25,
         failure_penalty: float = 1.0,
         families: Sequence[str] | str | None = None,
+        route_file: str | None = None,
         score: str = "corridor",
         route_width: float = DEFAULT_HALF_WIDTH,
         difficulty: float = routes.DEFAULT_DIFFICULTY,
@@ -355,6 +359,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError("at least one reward weight must be > 0")
         self.failure_penalty = s.non_negative("failure_penalty", failure_penalty)
         self.families = s.families_tuple(families, routes.families_of(self.score_mode))
+        #: Routes drawn instead of the families (``route_file``), in the file's order.
+        self.route_pool: tuple[Route, ...] = ()
+        if route_file is not None:
+            if self.score_mode != "corridor":
+                raise ValueError("route_file needs the route task (score='corridor')")
+            self.route_pool = tuple(routes.load_file(route_file).values())
         self.route_width = s.positive("route_width", route_width)
         if self.route_width < routes.MIN_HALF_WIDTH:
             raise ValueError(f"route_width must be >= {routes.MIN_HALF_WIDTH} L_vb")
@@ -496,6 +506,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             if spec is None:
                 return targets_mod.sample(rng, self.families)
             return targets_mod.resolve(spec, rng)
+        if spec is None and self.route_pool:
+            return self.route_pool[int(rng.integers(len(self.route_pool)))]
         if spec is None:
             return routes.sample(rng, self.families, self.difficulty)
         return routes.resolve(spec, rng, self.difficulty, self.route_width)
