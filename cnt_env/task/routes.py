@@ -493,8 +493,8 @@ MAX_ROUTE_FILE_BYTES = 1 << 24
 def load_file(path: str | Path) -> dict[str, Route]:
     """Named routes from a JSON or YAML file (``.yml``/``.yaml``; anything else is read as
     JSON), for ``cnt-evaluate --route-file`` and the env's ``route_file``: a list of route
-    dicts (the format of
-    :func:`from_dict`), each with a ``name``, or a mapping ``{name: route dict}``.
+    dicts (the format of :func:`from_dict`), each with a ``name``, or a mapping
+    ``{name: route dict}``.
 
     Every route is validated as ``reset`` would; a name must be unique and may not be a
     family or held-out name (it would be ambiguous). Raises ValueError naming the file
