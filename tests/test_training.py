@@ -179,6 +179,32 @@ def test_evaluate_on_routes_of_a_route_file(tmp_path: Path) -> None:
     assert (out / "traces_my_jog.png").is_file()
 
 
+def test_reuse_takes_a_file_route_s_episodes_only_for_the_same_route(tmp_path: Path) -> None:
+    """--reuse with --route-file: episodes of a name are reused only where the earlier run
+    evaluated the same route under it (its summary.json), never a route of the same name
+    with other waypoints."""
+    from cnt_env.task import routes
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 2}}
+    jog = routes.from_dict({"name": "jog", "waypoints": [[0, 0], [30, 0], [30, 20]]})
+    other = routes.from_dict({"name": "jog", "waypoints": [[0, 0], [0, 40]]})
+    first = tmp_path / "first"
+    evaluate(["random"], ["jog"], [0], config, first, jobs=1, custom_routes={"jog": jog})
+    saved = json.loads((first / "episodes.json").read_text())
+    (first / "episodes.json").write_text(json.dumps([{**r, "wall_s": -1.0} for r in saved]))
+
+    def wall(route: routes.Route) -> float:
+        out = tmp_path / f"again_{len(route.waypoints)}"
+        evaluate(["random"], ["jog"], [0], config, out, jobs=1, reuse=[first],
+                 custom_routes={"jog": route})  # fmt: skip
+        with (out / "episodes.csv").open() as fh:
+            return float(next(csv.DictReader(fh))["wall_s"])
+
+    assert wall(jog) == -1.0  # the same route: reused
+    assert wall(other) >= 0.0  # another route under the same name: run again
+
+
 def test_episode_frame_is_relative_to_the_contact_at_reset() -> None:
     """The results' frame: the trace from the contact point at reset, and the route (which
     starts there), both shifted so that point is the origin."""

@@ -304,13 +304,22 @@ def _save_results(out: Path, results: Sequence[dict[str, Any]]) -> None:
     np.savez_compressed(out / "traces.npz", **arrays)
 
 
-def _load_results(path: Path, skip: set[str]) -> list[dict[str, Any]]:
-    """Episodes saved by a previous run in ``path`` whose policy is not in ``skip``."""
+def _load_results(
+    path: Path, skip: set[str], custom: Mapping[str, routes.Route] | None = None
+) -> list[dict[str, Any]]:
+    """Episodes saved by a previous run in ``path`` whose policy is not in ``skip`` and
+    whose target is the same route as now: a name of ``custom`` (``--route-file``) only
+    where that run recorded the same route for it, any other name only where it was not a
+    route of a file there (its ``summary.json``'s ``custom_routes``)."""
     rows = json.loads((path / "episodes.json").read_text())
     data = np.load(path / "traces.npz")
+    summary = path / "summary.json"
+    theirs = json.loads(summary.read_text()).get("custom_routes", {}) if summary.is_file() else {}
+    ours = {t: json.loads(json.dumps(r.to_dict())) for t, r in (custom or {}).items()}
     return [{"row": row, "trace": data[f"trace_{i}"], "target_points": data[f"target_{i}"],
              "episode_file": None}
-            for i, row in enumerate(rows) if row["policy"] not in skip]  # fmt: skip
+            for i, row in enumerate(rows) if row["policy"] not in skip
+            and theirs.get(row["target"]) == ours.get(row["target"])]  # fmt: skip
 
 
 # ---- plots --------------------------------------------------------------------------------
@@ -624,7 +633,7 @@ def evaluate(
     reused: set[str] = set()
     if reuse:
         have = {(r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
-                for d in reuse for r in _load_results(Path(d), skip=set())}  # fmt: skip
+                for d in reuse for r in _load_results(Path(d), set(), custom)}  # fmt: skip
         reused = {p for p in policies if p not in redo
                   and all((p, t, s) in have for t in targets for s in seeds)}  # fmt: skip
         if reused:
@@ -671,7 +680,7 @@ def evaluate(
                     })  # fmt: skip
         results = pool.map(run_episode, job_list, chunksize=1)
     if reuse:
-        old = [r for d in reuse for r in _load_results(Path(d), skip=set(policies) - reused)]
+        old = [r for d in reuse for r in _load_results(Path(d), set(policies) - reused, custom)]
         seen, keep = set(), []
         for r in old:  # first directory wins
             key = (r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
