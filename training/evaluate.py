@@ -837,13 +837,14 @@ def main(argv: list[str] | None = None) -> int:
             custom = routes.load_file(args.route_file)
         except ValueError as exc:
             parser.error(f"--route-file: {exc}")
-    names = [*held_out_names(env_kwargs), *custom]
+    held = list(held_out_names(env_kwargs))
     if args.targets is None:
-        targets = list(custom) or list(held_out_names(env_kwargs))
+        targets = list(custom) or held
+    elif args.targets == "all":  # the held-out set, not the file's routes
+        targets = held
     else:
         try:
-            targets = (list(held_out_names(env_kwargs)) if args.targets == "all"
-                       else held_out_targets(args.targets, names))  # fmt: skip
+            targets = held_out_targets(args.targets, [*held, *custom])
         except ValueError as exc:
             parser.error(f"--targets: {exc}")
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))

@@ -137,7 +137,8 @@ def run_point(point: SweepPoint) -> dict[str, Any]:
     for key in ("sim_time", "steps", "newton_iterations", "wall_time_s"):
         row[key] = result[key]
     measured = ("peak_to_peak", "n_uturns", "n_loops", "n_cycles", "amplitude_cv",
-                "wavelength_cv", *sorted(LATER_RESULT_COLUMNS))  # fmt: skip
+                "wavelength_cv", "settled_amplitude_cv", "settled_wavelength_cv",
+                "settled_loop_events")  # fmt: skip
     for key in measured:  # NaN where the pattern has no such measure (a coil's CVs)
         row[key] = m.get(key, math.nan)
     for key in ("amplitude", "wavelength"):

@@ -506,9 +506,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             if spec is None:
                 return targets_mod.sample(rng, self.families)
             return targets_mod.resolve(spec, rng)
-        if spec is None and self.route_pool:
-            return self.route_pool[int(rng.integers(len(self.route_pool)))]
         if spec is None:
+            if self.route_pool:  # route_file: the user's routes instead of the families
+                return self.route_pool[int(rng.integers(len(self.route_pool)))]
             return routes.sample(rng, self.families, self.difficulty)
         return routes.resolve(spec, rng, self.difficulty, self.route_width)
 
