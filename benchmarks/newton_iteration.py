@@ -77,8 +77,9 @@ def bench(n_nodes: int, repeats: int) -> dict:
                       ws["_m1"], ws["_m2"], ws["_kb"], ws["_kappa"], ws["_twist"])  # fmt: skip
         assemble(q, q_old, rod.u, n_nodes, dt, rod.mass, rod.fixed, rod.rest_lengths,
                  rod.voronoi_lengths, m.k_s, m.k_b, m.k_t, ws["_m1"], ws["_m2"], ws["_twist"],
-                 rod.ext_force, rod.drag_on, rod.flow, d.mu, d.sigma, d.c_sigma, d.law_code,
-                 rod.vdw, rod.sub_friction, rod.sub_stiffness, rod.sub_anchor, ws["_force"],
+                 rod.ext_force, rod.drag_on, rod.flow, d.shear, d.mu, d.sigma, d.c_sigma,
+                 d.law_code, rod.vdw, rod.sub_friction, rod.sub_stiffness, rod.sub_anchor,
+                 ws["_force"],
                  ws["_ab"], ws["_rhs"], rod.tangents_old, rod.options.exact_jacobian, True,
                  rod._ab_soft, SOFT_FRESH)  # fmt: skip
 

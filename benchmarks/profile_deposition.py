@@ -89,7 +89,7 @@ def iteration_split(rod: stepper.Rod, dt: float, repeats: int = 200) -> dict:
                               rod._m1, rod._m2, rod._kb, rod._kappa, rod._twist)  # fmt: skip
         stepper.assemble(q, q_old, u_old, n, dt, rod.mass, rod.fixed, rod.rest_lengths,
                          rod.voronoi_lengths, m.k_s, m.k_b, m.k_t, rod._m1, rod._m2,
-                         rod._twist, rod.ext_force, rod.drag_on, rod.flow, d.mu, d.sigma,
+                         rod._twist, rod.ext_force, rod.drag_on, rod.flow, d.shear, d.mu, d.sigma,
                          d.c_sigma, d.law_code, rod.vdw, rod.sub_friction, rod.sub_stiffness,
                          rod.sub_anchor, rod._force, ab, rhs, rod.tangents_old,
                          rod.options.exact_jacobian, not reduced, rod._ab_soft,

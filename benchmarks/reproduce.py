@@ -198,6 +198,10 @@ CANDIDATES["none_fine"] = dict(CANDIDATES["C_fine"], sliding="none")
 # edge, kappa_c l, is then the paper's on the model's finer mesh (RESULTS.md, issue 12,
 # "The snap rule's length")
 CANDIDATES["C_fine_snap1"] = dict(CANDIDATES["C_fine"], snap_length=1.0)
+# C_fine in a linear boundary layer, the flow vbar y / Hbar (DepositionConfig.flow_profile;
+# vbar at the rod's top) instead of the paper's uniform flow (RESULTS.md, issue 12, "A
+# boundary layer: the pattern follows the flow at the rod's top")
+CANDIDATES["C_fine_shear"] = dict(CANDIDATES["C_fine"], flow_profile="linear")
 
 SERP = "serpentine"
 COIL = "coil"

@@ -20,6 +20,7 @@ __all__ = [
     "DEMO_DEPOSIT",
     "ENV_MESH",
     "ENV_SIM_DEFAULTS",
+    "FLOW_PROFILES",
     "INITIAL_RADIUS",
     "MESH",
     "MODEL",
@@ -48,7 +49,12 @@ MODEL: MappingProxyType[str, Any] = MappingProxyType({
     "friction": 0.0,
     "tail_clamp": "xyz",
     "tail_length": 195.0,
+    "flow_profile": "uniform",
 })  # fmt: skip
+
+#: The flow's profile over the height (DepositionConfig.flow_profile): the paper's
+#: uniform flow, or a linear boundary layer with the set flow at the rod's top.
+FLOW_PROFILES: tuple[str, ...] = ("uniform", "linear")
 
 #: Mesh and start-up arc per preset: one discretisation for both, delta = 0.2 L_vb where
 #: the rod bends (the delta study: R0 7.48, -2.2%, and the serpentine's A converged, where

@@ -30,6 +30,7 @@ from cnt_env import units
 from cnt_env.io import package_version
 from cnt_env.presets import (
     DEFAULT_KAPPA_C,
+    FLOW_PROFILES,
     INITIAL_RADIUS,
     MESH,
     MODEL,
@@ -270,6 +271,7 @@ class RunOptions:
     drag_law: str = MODEL["drag_law"]
     sliding: str = MODEL["sliding"]
     friction: float = MODEL["friction"]
+    flow_profile: str = MODEL["flow_profile"]
     coarse_delta: float | None = None
     fine_length: float | None = None
     contact_mode: str = "event"
@@ -306,6 +308,7 @@ class RunSpec:
             "drag_law": c.drag_law,
             "sliding": c.sliding,
             "friction": c.friction,
+            "flow_profile": c.flow_profile,
             "coarse_delta": c.coarse_delta,
             "fine_length": c.fine_length,
             "residual_tol": c.newton.residual_tol,
@@ -342,6 +345,7 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         _choice("--substrate", opts.substrate, SUBSTRATES)
     _choice("--drag-law", opts.drag_law, DRAG_LAWS)
     _choice("--sliding", opts.sliding, SLIDING_OPTIONS)
+    _choice("--flow-profile", opts.flow_profile, FLOW_PROFILES)
     _choice("--contact-mode", opts.contact_mode, CONTACT_MODES)
     contact: dict[str, Any] = {"mode": opts.contact_mode}
     if opts.adhesion is not None:
@@ -416,7 +420,8 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         sim_config = DepositionConfig(
             params=params, dt=opts.dt, drag_law=opts.drag_law,
             contact=ContactOptions(**contact), initial_radius=radius,
-            sliding=opts.sliding, friction=friction, coarse_delta=coarse,
+            sliding=opts.sliding, friction=friction, flow_profile=opts.flow_profile,
+            coarse_delta=coarse,
             fine_length=mesh["fine_length"] if opts.fine_length is None else opts.fine_length,
         )  # fmt: skip
     except (ValueError, TypeError) as exc:

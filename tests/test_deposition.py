@@ -195,6 +195,24 @@ def test_step_is_capped_in_absolute_time_on_the_stepped_substrate_only() -> None
             DepositionConfig(params=high, dt_hbar_cap=bad)
 
 
+def test_the_boundary_layer_is_the_uniform_flow_where_the_flow_is_uniform_in_effect() -> None:
+    """flow_profile "linear" scales the flow by y / Hbar: without a flow it is the uniform
+    model bit for bit; under a flow it lays another trace, and a still-air start then a
+    flow set between steps (set_flow, as the env does) keeps the profile."""
+    still = [DepositionSim(small_config(flow_profile=p), seed=2) for p in ("uniform", "linear")]
+    for sim in still:
+        sim.run(3.0)
+    np.testing.assert_array_equal(still[0].trace(), still[1].trace())
+    np.testing.assert_array_equal(still[0].rod.q, still[1].rod.q)
+    for sim in still:
+        sim.set_flow(0.2, 0.5)
+        sim.run(6.0)
+    assert still[1].rod.drag.shear == 1.0 / 30.0
+    assert not np.array_equal(still[0].trace(), still[1].trace())
+    with pytest.raises(ValueError, match="flow_profile"):
+        small_config(flow_profile="parabolic")
+
+
 def test_bad_config_rejected_with_named_parameter() -> None:
     params = paper_groups("coil")
     with pytest.raises(ValueError, match="dt"):

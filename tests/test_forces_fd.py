@@ -33,11 +33,11 @@ def _dense(ab: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def _force_and_jac(kernel, q, q_old, rest, dt, flow, drag_on):
+def _force_and_jac(kernel, q, q_old, rest, dt, flow, drag_on, shear=0.0):
     n_nodes = (q.size + 1) // 4
     f = np.zeros(q.size)
     ab = np.zeros((LDAB, q.size))
-    kernel(q, q_old, dt, n_nodes, rest, drag_on, flow, 1.3, 1.0, 2.29, f, ab, True, NO_FIXED)
+    kernel(q, q_old, dt, n_nodes, rest, drag_on, flow, shear, 1.3, 1.0, 2.29, f, ab, True, NO_FIXED)
     return f, _dense(ab, q.size)
 
 
@@ -88,6 +88,54 @@ def test_printed_drag_jacobian_in_a_strong_flow(seed: int) -> None:
     assert np.max(np.abs(jac + fd)) < JAC_RTOL * np.max(np.abs(jac))
 
 
+def _lifted(q: np.ndarray, lift: float) -> np.ndarray:
+    """q with every node raised by ``lift`` in y (the flow's profile reads the height)."""
+    out = q.copy()
+    out[1::4] += lift
+    return out
+
+
+@pytest.mark.parametrize("kernel", [add_linear_drag, add_printed_drag])
+@pytest.mark.parametrize("seed", range(3))
+def test_drag_jacobian_in_a_sheared_flow(kernel, seed: int) -> None:
+    """The linear boundary layer (DragParams.shear): the flow depends on each edge's
+    height, and J carries that column (forces._add_shear_columns) exactly. The rod is
+    lifted clear of y = 0, where the profile is clamped; lifted less, the random rods of
+    seeds 0 and 2 (they descend from y = 0) put their lowest edges below it, where the
+    profile is 0 and so is the column."""
+    q, q_old, rest, dt, flow, on = _setup(seed)
+    shear = 0.4
+    for lift in (5.0, 2.0):
+        q1, q1_old = _lifted(q, lift), _lifted(q_old, lift)
+
+        def force(x, q1_old=q1_old):
+            return _force_and_jac(kernel, x, q1_old, rest, dt, flow, on, shear)[0]
+
+        _, jac = _force_and_jac(kernel, q1, q1_old, rest, dt, flow, on, shear)
+        fd = _fd_jac(force, q1)
+        assert np.max(np.abs(jac + fd)) < JAC_RTOL * np.max(np.abs(jac))
+
+
+def test_sheared_flow_is_the_uniform_flow_scaled_by_height() -> None:
+    """A still rod along x at height y in a linear boundary layer of shear s feels the
+    drag of a uniform flow s y times the set one: the profile v(y) = v s y, clamped at 0
+    below the substrate."""
+    rest = np.array([1.0])
+    on = np.ones(1, dtype=np.uint8)
+    flow = np.array([0.0, 0.0, 0.4])  # normal to the edge: F = C mu l v per edge
+    for y in (3.0, 0.5, -0.5):
+        q = np.array([0.0, y, 0.0, 0.0, 1.0, y, 0.0])
+        for kernel in (add_linear_drag, add_printed_drag):
+            f_shear, f_uniform = np.zeros(7), np.zeros(7)
+            ab = np.zeros((LDAB, 7))
+            kernel(q, q, 1.0, 2, rest, on, flow, 0.25, 1.3, 1.0, 2.29, f_shear, ab, False,
+                   NO_FIXED)  # fmt: skip
+            kernel(q, q, 1.0, 2, rest, on, flow * 0.25 * max(y, 0.0), 0.0, 1.3, 1.0, 2.29,
+                   f_uniform, ab, False, NO_FIXED)  # fmt: skip
+            np.testing.assert_allclose(f_shear, f_uniform, rtol=1e-12, atol=1e-15)
+            assert f_shear[2] == pytest.approx(0.5 * 2.29 * 1.3 * 0.4 * 0.25 * max(y, 0.0))
+
+
 @pytest.mark.parametrize("seed", range(2))
 def test_printed_drag_z_only_edges_keep_their_z_entries(seed: int) -> None:
     """With nodes fixed in x and y only the z-z entries are assembled, and they are the
@@ -100,7 +148,7 @@ def test_printed_drag_z_only_edges_keep_their_z_entries(seed: int) -> None:
     part = np.zeros(n), np.zeros((LDAB, n))
     for (f, ab), fx in ((full, NO_FIXED), (part, fixed)):
         add_printed_drag(
-            q, q_old, dt, (n + 1) // 4, rest, on, flow, 1.3, 1.0, 2.29, f, ab, True, fx
+            q, q_old, dt, (n + 1) // 4, rest, on, flow, 0.0, 1.3, 1.0, 2.29, f, ab, True, fx
         )
     free = np.flatnonzero(fixed == 0)
     dense_full, dense_part = _dense(full[1], n), _dense(part[1], n)
@@ -115,7 +163,7 @@ def test_printed_law_matches_linear_for_axial_and_normal_motion() -> None:
     for flow in (np.array([0.4, 0.0, 0.0]), np.array([0.0, 0.0, -0.4])):
         f_lin, f_pr = np.zeros(7), np.zeros(7)
         ab = np.zeros((LDAB, 7))
-        args = (rest, on, flow, 1.3, 1.0, 2.29)
+        args = (rest, on, flow, 0.0, 1.3, 1.0, 2.29)
         add_linear_drag(q, q, 1.0, n_nodes, *args, f_lin, ab, False, NO_FIXED)
         add_printed_drag(q, q, 1.0, n_nodes, *args, f_pr, ab, False, NO_FIXED)
         np.testing.assert_allclose(f_pr, f_lin, rtol=1e-12, atol=1e-15)

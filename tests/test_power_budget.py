@@ -28,7 +28,7 @@ def test_drag_powers_are_the_solvers_drag_force() -> None:
     d = rod.drag
     # q_old = q - u dt with dt = 1: the solver's velocity (q - q_old) / dt is u
     no_jacobian, no_fixed = np.zeros((1, 1)), np.zeros(0, bool)
-    add_linear_drag(q, q - u, 1.0, n, rod.rest_lengths, rod.drag_on, rod.flow, d.mu,
+    add_linear_drag(q, q - u, 1.0, n, rod.rest_lengths, rod.drag_on, rod.flow, d.shear, d.mu,
                     d.sigma, d.c_sigma, force, no_jacobian, False, no_fixed)  # fmt: skip
     p = pb.edge_drag_powers(sim, near=5.0)
     into_rod = p["flow_in"] - p["susp_axial"] - p["susp_normal"] - p["deposited"]

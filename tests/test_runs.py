@@ -57,6 +57,7 @@ def test_run_options_is_frozen_and_resolve_matches_resolve_run() -> None:
         ({"friction": 1.0}, "--friction"),  # the coil preset's flat sticky substrate
         ({"preset": "x"}, "--preset"),
         ({"transient": -5.0}, "--transient"),
+        ({"flow_profile": "parabolic"}, "--flow-profile"),
     ],
 )
 def test_invalid_input_names_the_flag(kwargs: dict, flag: str) -> None:
@@ -179,6 +180,24 @@ def test_friction_reaches_the_simulator_and_its_record() -> None:
     without = {k: v for k, v in spec.config_dict().items() if k != "friction"}
     assert without == {k: v for k, v in rough_spec.config_dict().items() if k != "friction"}
     assert grid.sweep_hash(spec, ["vbar"], base) != grid.sweep_hash(rough_spec, ["vbar"], rough)
+
+
+def test_the_flow_profile_reaches_the_drag_and_its_record() -> None:
+    """--flow-profile linear is DepositionConfig.flow_profile, a drag shear of 1/Hbar
+    (the set flow at the rod's top), recorded in the run's config; the default is the
+    paper's uniform flow and keeps a sweep's hash."""
+    from cnt_env.sim.deposition import DepositionSim
+    from cnt_env.sweep import grid
+
+    base = runs.RunOptions(preset="serpentine", deposit=5.0, groups={"Hbar": 40.0})
+    layer = dataclasses.replace(base, flow_profile="linear")
+    spec, layer_spec = runs.resolve(base), runs.resolve(layer)
+    assert spec.config_dict()["flow_profile"] == "uniform"
+    assert layer_spec.config_dict()["flow_profile"] == "linear"
+    assert DepositionSim(spec.sim_config).rod.drag.shear == 0.0
+    assert DepositionSim(layer_spec.sim_config).rod.drag.shear == pytest.approx(1.0 / 40.0)
+    assert grid.LATER_CONFIG_FIELDS["flow_profile"] == spec.sim_config.flow_profile
+    assert grid.sweep_hash(spec, ["vbar"], base) != grid.sweep_hash(layer_spec, ["vbar"], layer)
 
 
 def test_the_settled_fraction_reaches_the_measure_and_its_record() -> None:

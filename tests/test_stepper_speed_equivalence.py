@@ -166,7 +166,7 @@ def test_z_only_stencils_assemble_the_same_matrix() -> None:
 
     def drag(kernel):
         def run(mask, force, ab):
-            kernel(rod.q, q_old, sim.dt, n, rod.rest_lengths, rod.drag_on, flow, d.mu,
+            kernel(rod.q, q_old, sim.dt, n, rod.rest_lengths, rod.drag_on, flow, d.shear, d.mu,
                    d.sigma, d.c_sigma, force, ab, True, mask)  # fmt: skip
 
         return run
@@ -366,7 +366,7 @@ def test_lagged_jacobian_blocks_add_up_to_the_fresh_one() -> None:
         ab, rhs, force = band_alloc(nd), np.zeros(nd), np.zeros(nd)
         assemble(q, q_old, rod.u, n, sim.dt, rod.mass, rod.fixed, rod.rest_lengths,
                  rod.voronoi_lengths, m.k_s, m.k_b, m.k_t, rod._m1, rod._m2, rod._twist,
-                 rod.ext_force, rod.drag_on, flow, d.mu, d.sigma, d.c_sigma, d.law_code,
+                 rod.ext_force, rod.drag_on, flow, d.shear, d.mu, d.sigma, d.c_sigma, d.law_code,
                  rod.vdw, rod.sub_friction, rod.sub_stiffness, rod.sub_anchor, force, ab, rhs,
                  rod.tangents_old, False, True, soft, mode)  # fmt: skip
         return ab, rhs

@@ -35,7 +35,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from cnt_env.io import package_version, to_jsonable
-from cnt_env.presets import MESH, MODEL, SETTLED_FRACTION
+from cnt_env.presets import FLOW_PROFILES, MESH, MODEL, SETTLED_FRACTION
 from cnt_env.runs import ADHESION_MODELS, CONTACT_MODES, DRAG_LAWS, SLIDING_OPTIONS, Limits
 
 PROG = "cnt-sim"
@@ -295,6 +295,14 @@ def add_model_arguments(m: Any) -> None:
         metavar="ETA",
         help="stepped substrate: viscous friction on each sliding DOF of a deposited node, "
         f"-ETA l u, ETA in units of mu (default: {MODEL['friction']:g}; docs/model.md §4)",
+    )
+    m.add_argument(
+        "--flow-profile",
+        choices=FLOW_PROFILES,
+        default=MODEL["flow_profile"],
+        help="the flow over the height y: uniform (the paper's) or linear, a boundary layer "
+        f"vbar y / Hbar with vbar at the rod's top (default: {MODEL['flow_profile']}; "
+        "docs/model.md §4)",
     )
     m.add_argument(
         "--coarse-delta",

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
-from cnt_env.presets import MODEL, NEWTON, STEP_HBAR_CAP
+from cnt_env.presets import FLOW_PROFILES, MODEL, NEWTON, STEP_HBAR_CAP
 from cnt_env.sim.forces import (
     ADHESION_MODELS,
     VDW_BETA0,
@@ -101,6 +101,10 @@ class DepositionConfig:
     serpentine preset), ``friction``, ``snap``, ``snap_stiffness``, ``snap_length`` and
     ``tail_clamp`` apply to the stepped one (substrate.Stepped documents each).
 
+    ``flow_profile`` [choice, docs/model.md §4]: ``"uniform"``, the paper's flow, the same
+    at every height; ``"linear"``, a boundary layer over the substrate (no slip at y = 0),
+    the flow ``vbar`` (y / Hbar), so that ``vbar`` is the flow at the rod's top.
+
     Graded discretisation [choice, docs/model.md §6]: with ``coarse_delta`` set, edges are
     injected at the top with that length and split into edges of ``delta_bar`` once they
     come within ``fine_length`` (arc length) of the contact node, where the curvature
@@ -137,6 +141,7 @@ class DepositionConfig:
     max_nodes: int = 200_000
     tail_clamp: str = MODEL["tail_clamp"]
     snap_length: float | None = None
+    flow_profile: str = MODEL["flow_profile"]
     contact: ContactOptions = field(default_factory=ContactOptions)
     newton: NewtonOptions = field(default_factory=lambda: NewtonOptions(**NEWTON))
 
@@ -192,6 +197,10 @@ class DepositionConfig:
                 f"delta_bar = {p.delta_bar:g}), more than max_nodes = {self.max_nodes}: "
                 "coarsen delta_bar (or coarse_delta), lower Hbar, or raise max_nodes if "
                 "you have the memory and time"
+            )
+        if self.flow_profile not in FLOW_PROFILES:
+            raise ValueError(
+                f"flow_profile must be one of {list(FLOW_PROFILES)}, got {self.flow_profile!r}"
             )
         check_sliding_options(
             self.sliding, self.friction, self.snap, self.snap_stiffness, self.tail_clamp,
@@ -298,7 +307,9 @@ class DepositionSim:
             k_s=p.stretch_stiffness, k_b=p.bend_stiffness, k_t=p.twist_stiffness,
             rho=p.mass_per_length, r0=p.r0_bar,
         )  # fmt: skip
-        drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma, law=config.drag_law)
+        shear = 1.0 / p.Hbar if config.flow_profile == "linear" else 0.0  # DragParams.shear
+        drag = DragParams(mu=p.drag_mu, sigma=p.sigma, c_sigma=p.c_sigma, law=config.drag_law,
+                          shear=shear)  # fmt: skip
         rng = np.random.default_rng(seed)
         self.inject_delta = config.coarse_delta or self.delta
         nodes, rest = initial_shape(p.Hbar, config.initial_radius, self.delta,
@@ -600,7 +611,8 @@ class DepositionSim:
                 progress(min(self.deposited_length, deposit_length), deposit_length)
 
     def set_flow(self, vbar: float, phi: float) -> None:
-        """Change the flow between steps: speed vbar (units of e_v/(mu H)), direction phi."""
+        """Change the flow between steps: speed vbar (units of e_v/(mu H); with
+        ``flow_profile`` "linear", the flow at the rod's top), direction phi."""
         if not (math.isfinite(vbar) and vbar >= 0 and math.isfinite(phi)):
             raise ValueError(f"flow must be finite with vbar >= 0, got vbar={vbar}, phi={phi}")
         s = vbar / self.params.Hbar

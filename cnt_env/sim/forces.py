@@ -41,12 +41,15 @@ def _edge_velocity_state(
     q_old: np.ndarray,
     dt: float,
     flow: np.ndarray,
+    shear: float,
     j: int,
     t: np.ndarray,
     vr: np.ndarray,
 ) -> float:
-    """Unit tangent t of edge j and the relative velocity v_r = v_flow - (u_j + u_{j+1})/2
-    at its midpoint (implicit-Euler velocities); returns |e_j|."""
+    """Unit tangent t of edge j and the relative velocity v_r = v_flow s(y) - (u_j +
+    u_{j+1})/2 at its midpoint (implicit-Euler velocities); returns |e_j|. The flow's
+    profile s(y) is 1 (uniform, ``shear`` 0) or ``shear`` max(y, 0) (a linear boundary
+    layer, :func:`shear_slope`), y the edge midpoint's height."""
     a = 4 * j
     b = a + 4
     ln = 0.0
@@ -54,10 +57,35 @@ def _edge_velocity_state(
         t[k] = q[b + k] - q[a + k]
         ln += t[k] * t[k]
     ln = math.sqrt(ln)
+    scale = 1.0
+    if shear > 0.0:
+        scale = shear * max(0.5 * (q[a + 1] + q[b + 1]), 0.0)
     for k in range(3):
         t[k] /= ln
-        vr[k] = flow[k] - 0.5 * (q[a + k] - q_old[a + k] + q[b + k] - q_old[b + k]) / dt
+        vr[k] = flow[k] * scale - 0.5 * (q[a + k] - q_old[a + k] + q[b + k] - q_old[b + k]) / dt
     return ln
+
+
+@njit(cache=True, inline="always")
+def shear_slope(q: np.ndarray, a: int, b: int, shear: float) -> float:
+    """d s / d y_node of the flow's profile at the edge of nodes a.., b.. (DOF offsets):
+    each node's height moves the midpoint by half; 0 for a uniform flow or a midpoint
+    below the substrate (where s is clamped at 0)."""
+    if shear > 0.0 and q[a + 1] + q[b + 1] > 0.0:
+        return 0.5 * shear
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _add_shear_columns(ab: np.ndarray, a: int, b: int, dfdy: np.ndarray) -> None:
+    """J -= dF_node/dy for the drag's dependence on the edge's height through the flow's
+    profile: ``dfdy[k]`` = dF_node_k / dy_a = dF_node_k / dy_b, the same on both nodes'
+    rows (a + k, b + k) and both height columns (a + 1, b + 1)."""
+    for k in range(3):
+        ab[_DIAG + k - 1, a + 1] -= dfdy[k]
+        ab[_DIAG + k + 3, a + 1] -= dfdy[k]
+        ab[_DIAG + k - 5, b + 1] -= dfdy[k]
+        ab[_DIAG + k - 1, b + 1] -= dfdy[k]
 
 
 @njit(cache=True, inline="always")
@@ -77,6 +105,7 @@ def add_linear_drag(
     rest_lengths: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -89,17 +118,19 @@ def add_linear_drag(
 
     ``fixed`` (n_dof; empty: none): an edge whose nodes are fixed in x and y gets only its
     z-z Jacobian entries (the others are discarded with the fixed rows and columns;
-    the same bits, :func:`_z_only_edge`)."""
+    the same bits, :func:`_z_only_edge`). ``shear``: the flow's profile
+    (:func:`_edge_velocity_state`)."""
     t = np.empty(3)
     vr = np.empty(3)
     fe = np.empty(3)
     geo = np.empty((3, 3))
+    dfdy = np.empty(3)
     for j in range(n_nodes - 1):
         if not drag_on[j]:
             continue
         a = 4 * j
         b = a + 4
-        ln = _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
+        ln = _edge_velocity_state(q, q_old, dt, flow, shear, j, t, vr)
         tv = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
         coef = rest_lengths[j] * mu
         for k in range(3):
@@ -133,6 +164,12 @@ def add_linear_drag(
                 ab[_DIAG + k - m - 4, b + m] -= dfb
                 ab[_DIAG + k - m + 4, a + m] -= dfa
                 ab[_DIAG + k - m, b + m] -= dfb
+        slope = shear_slope(q, a, b, shear)
+        if slope > 0.0 and lo == 0:  # dF_node/dy = coef A v_flow ds/dy / 2
+            tf = t[0] * flow[0] + t[1] * flow[1] + t[2] * flow[2]
+            for k in range(3):
+                dfdy[k] = 0.5 * coef * slope * (c_sigma * flow[k] + (sigma - c_sigma) * tf * t[k])
+            _add_shear_columns(ab, a, b, dfdy)
 
 
 @njit(cache=True)
@@ -307,6 +344,7 @@ def add_printed_drag(
     rest_lengths: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -323,19 +361,20 @@ def add_printed_drag(
     linear law for purely axial or purely normal motion and is weaker in between. The
     Jacobian is exact: the velocity part and the geometric part (the tangent's dependence
     on q, which dominates the velocity part when |v_r| dt >> |e|, as in a strong flow).
-    ``fixed``: as for :func:`add_linear_drag`.
+    ``fixed`` and ``shear``: as for :func:`add_linear_drag`.
     """
     t = np.empty(3)
     vr = np.empty(3)
     b = np.empty(3)
     jac = np.empty((3, 3))
     dft = np.empty((3, 3))
+    dfdy = np.empty(3)
     for j in range(n_nodes - 1):
         if not drag_on[j]:
             continue
         a = 4 * j
         c = a + 4
-        ln = _edge_velocity_state(q, q_old, dt, flow, j, t, vr)
+        ln = _edge_velocity_state(q, q_old, dt, flow, shear, j, t, vr)
         ax = t[0] * vr[0] + t[1] * vr[1] + t[2] * vr[2]
         nb2 = 0.0
         for k in range(3):
@@ -383,3 +422,9 @@ def add_printed_drag(
                 ab[_DIAG + k - m - 4, c + m] += d - geo
                 ab[_DIAG + k - m + 4, a + m] += d + geo
                 ab[_DIAG + k - m, c + m] += d - geo
+        slope = shear_slope(q, a, c, shear)
+        if slope > 0.0 and lo == 0:  # dF_node/dy = (dF/dv_r) v_flow ds/dy / 2
+            for k in range(3):
+                dfdy[k] = 0.5 * slope * (jac[k, 0] * flow[0] + jac[k, 1] * flow[1]
+                                         + jac[k, 2] * flow[2])  # fmt: skip
+            _add_shear_columns(ab, a, c, dfdy)

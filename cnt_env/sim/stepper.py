@@ -120,12 +120,16 @@ class RodMaterial:
 @dataclass(frozen=True)
 class DragParams:
     """Rarefied drag (paper eq. 2): axial sigma*mu, normal c_sigma*mu; ``law`` is
-    ``"linear"`` (default) or ``"printed"`` (forces.add_printed_drag)."""
+    ``"linear"`` (default) or ``"printed"`` (forces.add_printed_drag). ``shear`` is the
+    flow's profile over the height y: 0 (default) a uniform flow, the paper's; > 0 a
+    linear boundary layer, the flow ``Rod.flow`` times ``shear`` y (so ``Rod.flow`` at
+    y = 1/shear), in 1/length of the rod's units."""
 
     mu: float = 1.0
     sigma: float = 1.0
     c_sigma: float = 2.29
     law: str = "linear"
+    shear: float = 0.0
 
     @property
     def law_code(self) -> int:
@@ -134,7 +138,7 @@ class DragParams:
     def __post_init__(self) -> None:
         if self.law not in DRAG_LAWS:
             raise ValueError(f"drag law must be one of {list(DRAG_LAWS)}, got {self.law!r}")
-        for name in ("mu", "sigma", "c_sigma"):
+        for name in ("mu", "sigma", "c_sigma", "shear"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"DragParams.{name} must be finite and >= 0, got {v!r}")
@@ -229,6 +233,7 @@ def assemble(
     ext_force: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    flow_shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -276,11 +281,11 @@ def assemble(
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, soft_ab,
                            with_soft, tangents_old, transport, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
-        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                        force, soft_ab, with_soft, fixed)  # fmt: skip
+        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, flow_shear, mu,
+                        sigma, c_sigma, force, soft_ab, with_soft, fixed)  # fmt: skip
     else:
-        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                         force, soft_ab, with_soft, fixed)  # fmt: skip
+        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, flow_shear, mu,
+                         sigma, c_sigma, force, soft_ab, with_soft, fixed)  # fmt: skip
     if soft == SOFT_KEEP:
         for c in range(n_dof):
             for r in range(LDAB):
@@ -322,6 +327,7 @@ def residual(
     ext_force: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    flow_shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -345,11 +351,11 @@ def residual(
     elastic.add_bend_twist(q, n_nodes, m1, m2, twist, voronoi_lengths, k_b, k_t, force, ab, False,
                            m1, False, fixed)  # fmt: skip
     if drag_law == DRAG_LINEAR:
-        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                        force, ab, False, fixed)  # fmt: skip
+        add_linear_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, flow_shear, mu,
+                        sigma, c_sigma, force, ab, False, fixed)  # fmt: skip
     else:
-        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, mu, sigma, c_sigma,
-                         force, ab, False, fixed)  # fmt: skip
+        add_printed_drag(q, q_old, dt, n_nodes, rest_lengths, drag_on, flow, flow_shear, mu,
+                         sigma, c_sigma, force, ab, False, fixed)  # fmt: skip
     add_adhesion(q, n_nodes, voronoi_lengths, vdw, force, ab, False)
     add_substrate(q, q_old, dt, n_dof, sub_friction, sub_stiffness, sub_anchor, force, ab, False)
     res = 0.0
@@ -453,6 +459,7 @@ def newton_solve(
     ext_force: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    flow_shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -528,8 +535,8 @@ def newton_solve(
         if check and it >= 2 and res_prev * (res_prev / res_prev2) <= tol_abs:
             res = residual(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                            voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                           flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
-                           sub_anchor, force, ab, rhs)  # fmt: skip
+                           flow, flow_shear, mu, sigma, c_sigma, drag_law, vdw, sub_friction,
+                           sub_stiffness, sub_anchor, force, ab, rhs)  # fmt: skip
             n_resid += 1
             if not math.isfinite(res):
                 status = NON_FINITE
@@ -542,8 +549,8 @@ def newton_solve(
             soft = SOFT_REUSE if n_factor > 0 else SOFT_KEEP
         res = assemble(q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths,
                        voronoi_lengths, k_s, k_b, k_t, m1, m2, twist, ext_force, drag_on,
-                       flow, mu, sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness,
-                       sub_anchor, force, ab, rhs, tangents_old, transport,
+                       flow, flow_shear, mu, sigma, c_sigma, drag_law, vdw, sub_friction,
+                       sub_stiffness, sub_anchor, force, ab, rhs, tangents_old, transport,
                        not reduced, ab_soft, soft)  # fmt: skip
         if not math.isfinite(res):
             status = NON_FINITE
@@ -624,6 +631,7 @@ def implicit_step(
     ext_force: np.ndarray,
     drag_on: np.ndarray,
     flow: np.ndarray,
+    flow_shear: float,
     mu: float,
     sigma: float,
     c_sigma: float,
@@ -690,7 +698,7 @@ def implicit_step(
                 q[k] = q_old[k]
         status = newton_solve(
             q, q_old, u_old, n_nodes, dt, mass, fixed, rest_lengths, voronoi_lengths, k_s,
-            k_b, k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, mu,
+            k_b, k_t, tangents_old, d1_old, ref_twist_old, ext_force, drag_on, flow, flow_shear, mu,
             sigma, c_sigma, drag_law, vdw, sub_friction, sub_stiffness, sub_anchor, tol_abs,
             update_tol * min_rest, max_iter, tangents, lengths,
             d1, d2, m1, m2, kb, kappa, twist, ref_twist, force, ab, ipiv, rhs, out_stats, ab_r,
@@ -1029,7 +1037,7 @@ class Rod:
             self.q, self.u, self._q_old, self._u_old, n, dt,
             self.mass, self.fixed, self.rest_lengths, self.voronoi_lengths, m.k_s, m.k_b,
             m.k_t, self.tangents_old, self.d1_old, self.ref_twist_old, self.ext_force,
-            self.drag_on, self.flow, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
+            self.drag_on, self.flow, d.shear, d.mu, d.sigma, d.c_sigma, d.law_code, self.vdw,
             self.sub_friction, self.sub_stiffness, self.sub_anchor,
             o.residual_tol * o.force_scale, o.update_tol, o.max_iter,
             self._tangents, self._lengths, self._d1, self._d2, self._m1, self._m2,

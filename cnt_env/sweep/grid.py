@@ -229,6 +229,7 @@ def point_options(
 LATER_CONFIG_FIELDS: dict[str, Any] = {
     "friction": 0.0,
     "settled_fraction": SETTLED_FRACTION,
+    "flow_profile": "uniform",
 }
 
 
