@@ -9,8 +9,10 @@ Drag (docs/model.md §4), per unit length on edge j with unit tangent t:
     F_a = mu [sigma t t^T + C_sigma (I - t t^T)] v_r = mu A(t) v_r,
     v_r = v_flow - (u_j + u_{j+1}) / 2,  u = (q - q_n) / dt  (implicit Euler velocity),
 
-with A = C_sigma I + (sigma - C_sigma) t t^T. The edge force ebar_j F_a (ebar = rest length)
-is split half to each node. The Jacobian has the velocity part -ebar mu A / (4 dt) per node
+with A = C_sigma I + (sigma - C_sigma) t t^T; v_flow is uniform, or scaled by the height
+of the edge's midpoint in a linear boundary layer (``shear``, DragParams.shear, with its
+column in the Jacobian). The edge force ebar_j F_a (ebar = rest length) is split half to
+each node. The Jacobian has the velocity part -ebar mu A / (4 dt) per node
 pair (docs/model.md §4) and, because A depends on the tangent, a geometric part
 ebar mu (sigma - C_sigma) [(t.v_r) I + t v_r^T] (I - t t^T) / |e| / 2 per node, with
 the sign of d t / d x (- for x_j, + for x_{j+1}). Both are included, so Newton stays
@@ -49,7 +51,7 @@ def _edge_velocity_state(
     """Unit tangent t of edge j and the relative velocity v_r = v_flow s(y) - (u_j +
     u_{j+1})/2 at its midpoint (implicit-Euler velocities); returns |e_j|. The flow's
     profile s(y) is 1 (uniform, ``shear`` 0) or ``shear`` max(y, 0) (a linear boundary
-    layer, :func:`shear_slope`), y the edge midpoint's height."""
+    layer, :func:`_shear_slope`), y the edge midpoint's height."""
     a = 4 * j
     b = a + 4
     ln = 0.0
@@ -67,7 +69,7 @@ def _edge_velocity_state(
 
 
 @njit(cache=True, inline="always")
-def shear_slope(q: np.ndarray, a: int, b: int, shear: float) -> float:
+def _shear_slope(q: np.ndarray, a: int, b: int, shear: float) -> float:
     """d s / d y_node of the flow's profile at the edge of nodes a.., b.. (DOF offsets):
     each node's height moves the midpoint by half; 0 for a uniform flow or a midpoint
     below the substrate (where s is clamped at 0)."""
@@ -164,7 +166,7 @@ def add_linear_drag(
                 ab[_DIAG + k - m - 4, b + m] -= dfb
                 ab[_DIAG + k - m + 4, a + m] -= dfa
                 ab[_DIAG + k - m, b + m] -= dfb
-        slope = shear_slope(q, a, b, shear)
+        slope = _shear_slope(q, a, b, shear)
         if slope > 0.0 and lo == 0:  # dF_node/dy = coef A v_flow ds/dy / 2
             tf = t[0] * flow[0] + t[1] * flow[1] + t[2] * flow[2]
             for k in range(3):
@@ -422,7 +424,7 @@ def add_printed_drag(
                 ab[_DIAG + k - m - 4, c + m] += d - geo
                 ab[_DIAG + k - m + 4, a + m] += d + geo
                 ab[_DIAG + k - m, c + m] += d - geo
-        slope = shear_slope(q, a, c, shear)
+        slope = _shear_slope(q, a, c, shear)
         if slope > 0.0 and lo == 0:  # dF_node/dy = (dF/dv_r) v_flow ds/dy / 2
             for k in range(3):
                 dfdy[k] = 0.5 * slope * (jac[k, 0] * flow[0] + jac[k, 1] * flow[1]
