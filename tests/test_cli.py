@@ -41,7 +41,7 @@ RUN_KEYS = {
     "version",
 }
 CONFIG_KEYS = {"dt", "drag_law", "sliding", "contact_mode", "seed", "initial_radius",
-               "settled_fraction"}  # fmt: skip
+               "settled_fraction", "flow_profile"}  # fmt: skip
 TINY = ["--deposit", "5", "--Hbar", "40", "--transient", "0", "--delta", "1"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -446,6 +446,14 @@ def test_run_config_file_round_trips_and_flags_win(tmp_path: Path) -> None:
     u, b = load_trace(uniform), load_trace(again)
     assert u["config"]["coarse_delta"] is None and u["config"] == b["config"]
     np.testing.assert_array_equal(u["trace"], b["trace"])
+    layer = tmp_path / "l.npz"  # a boundary layer stays one, and lays another trace
+    assert _call([*argv, "--flow-profile", "linear", "--out", str(layer)])[0] == 0
+    assert _call(["run", "--config", f"{layer}.json", "--out", str(again)])[0] == 0
+    lay, b = load_trace(layer), load_trace(again)
+    assert lay["config"]["flow_profile"] == "linear" and lay["config"] == b["config"]
+    np.testing.assert_array_equal(lay["trace"], b["trace"])
+    assert a["config"]["flow_profile"] == "uniform"
+    assert not np.array_equal(lay["trace"], a["trace"])
     flat = tmp_path / "c.yaml"  # flag names as keys; a flag on the command line wins
     flat.write_text("preset: serpentine\nvbar: 0.05\nseed: 3\ndeposit: 5\nHbar: 40\n"
                     "transient: 0\ndelta: 1\n")  # fmt: skip
