@@ -37,7 +37,8 @@ __all__ = [
 #: "Issue 12: one configuration, the paper's trends" and "The delta study"): the linear
 #: drag law (docs/model.md §2), deposited nodes free in x and z until their edge snaps
 #: into the steps (sliding "C"), the snap applied between steps ("jump"), no substrate
-#: friction beyond the gas drag, and the far deposited tail clamped in x, y and z; on
+#: friction beyond the gas drag, the far deposited tail clamped in x, y and z, and the
+#: paper's flow, uniform in height (a boundary layer is FLOW_PROFILES' other choice); on
 #: MESH's rod of delta_bar = 0.2, where the coil's R0 and the serpentine's amplitude are
 #: converged in delta (candidate C_fine of benchmarks/reproduce.py). DepositionConfig
 #: takes its defaults from here; the other candidates of the study stay named options,
