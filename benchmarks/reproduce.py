@@ -435,6 +435,7 @@ def run_point(
         "sliding": cfg.sliding,
         "snap": cfg.snap,
         "friction": cfg.friction,
+        "flow_profile": cfg.flow_profile,
         "tail_clamp": cfg.tail_clamp,
         "tail_length": cfg.tail_length,
         "coarse_delta": cfg.coarse_delta,
@@ -452,6 +453,9 @@ def run_point(
         **_measured(m),
         "wall_s": round(wall, 1),
         "steps": sim.stats()["steps"],
+        # V: the trace laid over the simulated time, times Hbar (units e_v / (sigma mu H)),
+        # start-up included; the wavelength's kinematics, lambda = 4 A vbar / V
+        "deposition_speed": sim.deposited_length / sim.time * p.Hbar if sim.time > 0 else None,
     }
     return {"record": rec, "trace": np.asarray(trace[:, [0, 2]], dtype=np.float32)}
 

@@ -28,6 +28,10 @@ def test_quick_table_runs_and_resumes(tmp_path: Path, capsys) -> None:
     assert len(recs) == 3  # the coil and two vbar points
     assert all("coarse=4,fine=20,tol=1e-05" in key for key in recs)  # the model's mesh
     assert all(r["error"] is None and r["deposit"] == 40.0 for r in recs.values())
+    # the deposition speed in units of its scale e_v / (sigma mu H): of order 1 (0.4-0.8
+    # on the model's mesh), not per unit of internal time (~1 / Hbar)
+    assert all(0.2 < r["deposition_speed"] < 1.5 for r in recs.values())
+    assert all(r["flow_profile"] == "uniform" for r in recs.values())
     assert len(list((tmp_path / "traces").glob("*.npy"))) == 3
     assert "Model against paper" in (tmp_path / "summary_default.md").read_text()
     capsys.readouterr()
