@@ -205,6 +205,28 @@ def test_reuse_takes_a_file_route_s_episodes_only_for_the_same_route(tmp_path: P
     assert wall(other) >= 0.0  # another route under the same name: run again
 
 
+def test_reuse_carries_only_the_asked_episodes_and_the_first_directory_wins(
+    tmp_path: Path,
+) -> None:
+    """--reuse keeps, of a results dir, only the episodes of the asked targets and seeds
+    (a dir of seeds 0-1 reused for seed 1 carries seed 1 alone), each from the first dir
+    that has it."""
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 2}}
+    dirs = []
+    for tag in (-1.0, -2.0):
+        d = tmp_path / f"dir{len(dirs)}"
+        evaluate(["random"], ["u_turn"], [0, 1], config, d, jobs=1)
+        saved = json.loads((d / "episodes.json").read_text())
+        (d / "episodes.json").write_text(json.dumps([{**r, "wall_s": tag} for r in saved]))
+        dirs.append(d)
+    out = tmp_path / "again"
+    evaluate(["random"], ["u_turn"], [1], config, out, jobs=1, reuse=dirs)
+    rows = json.loads((out / "episodes.json").read_text())
+    assert [(r["seed"], r["wall_s"]) for r in rows] == [(1, -1.0)]
+
+
 def test_episode_frame_is_relative_to_the_contact_at_reset() -> None:
     """The results' frame: the trace from the contact point at reset, and the route (which
     starts there), both shifted so that point is the origin."""

@@ -630,14 +630,18 @@ def evaluate(
     if (rrd is not None or video is not None) and save_episodes is None:
         tmp = tempfile.TemporaryDirectory()
         save_episodes = Path(tmp.name)
-    reused: set[str] = set()
-    if reuse:
-        have = {(r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
-                for d in reuse for r in _load_results(Path(d), set(), custom)}  # fmt: skip
-        reused = {p for p in policies if p not in redo
-                  and all((p, t, s) in have for t in targets for s in seeds)}  # fmt: skip
-        if reused:
-            print(f"reusing the episodes of {sorted(reused)} from {reuse}")
+    # --reuse: each directory read once; the first holding an episode wins
+    wanted = {(p, t, int(s)) for p in policies for t in targets for s in seeds}
+    old: dict[tuple[str, str, int], dict[str, Any]] = {}
+    for d in reuse:
+        for r in _load_results(Path(d), set(), custom):
+            key = (r["row"]["policy"], r["row"]["target"], int(r["row"]["seed"]))
+            if key in wanted:
+                old.setdefault(key, r)
+    reused = {p for p in policies if p not in redo
+              and all((p, t, int(s)) in old for t in targets for s in seeds)}  # fmt: skip
+    if reused:
+        print(f"reusing the episodes of {sorted(reused)} from {list(map(str, reuse))}")
     with ctx.Pool(jobs) as pool:
         specs: dict[str, dict[str, Any]] = {}
         best = None
@@ -679,15 +683,7 @@ def evaluate(
                         "save_dir": str(save_episodes) if save_episodes else None,
                     })  # fmt: skip
         results = pool.map(run_episode, job_list, chunksize=1)
-    if reuse:
-        old = [r for d in reuse for r in _load_results(Path(d), set(policies) - reused, custom)]
-        seen, keep = set(), []
-        for r in old:  # first directory wins
-            key = (r["row"]["policy"], r["row"]["target"], r["row"]["seed"])
-            if key not in seen and r["row"]["policy"] in policies:
-                seen.add(key)
-                keep.append(r)
-        results = keep + results
+    results = [r for key, r in old.items() if key[0] in reused] + results
     rows = [r["row"] for r in results]
     _write_csv(out / "episodes.csv", rows)
     _save_results(out, results)
