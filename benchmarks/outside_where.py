@@ -14,7 +14,8 @@ prints, per policy, the mean outside length in the first ``--first`` L_vb and af
 precision without the first part's loss, and the per-episode first-part table; with
 ``--out`` it writes them as JSON (one entry per directory). With ``--legs ROUTE`` it
 prints instead, per policy, the outside length per episode on that route by its nearest
-leg and side (where a detour's loss lies).
+leg and side (where a detour's loss lies). With ``--corners ROUTES`` it prints, per policy,
+how far the trace runs past each corner of those routes along the leg that arrives there.
 """
 
 from __future__ import annotations
@@ -89,6 +90,40 @@ def outside_by_leg(trace: np.ndarray, route: np.ndarray, width: float) -> np.nda
     return by
 
 
+def corner_overshoot(trace: np.ndarray, waypoints: np.ndarray, width: float) -> list[float]:
+    """How far a trace (n, 2) runs past each corner (interior waypoint) of a route, along
+    the leg that arrives there: the largest (p - corner) . u over the nodes within
+    ``width`` of that leg's line, u its direction, laid before the trace first comes
+    within ``width`` of the next leg's midpoint (negative: it turned before the corner).
+    A run along the steps that overshoots a corner lays its excess outside the corridor
+    and turns late into the next leg."""
+    wp = np.asarray(waypoints, dtype=np.float64)
+    out = []
+    for k in range(1, len(wp) - 1):
+        u = (wp[k] - wp[k - 1]) / np.hypot(*(wp[k] - wp[k - 1]))
+        rel = trace - wp[k]
+        along = rel @ u
+        lateral = np.abs(rel @ np.array([-u[1], u[0]]))
+        reached = np.nonzero(np.hypot(*(trace - 0.5 * (wp[k] + wp[k + 1])).T) <= width)[0]
+        end = int(reached[0]) if reached.size else len(trace)
+        near = lateral[:end] <= width
+        out.append(float(along[:end][near].max()) if near.any() else float("nan"))
+    return out
+
+
+def corners(results: Path, target: str) -> dict[str, list[list[float]]]:
+    """Per policy, :func:`corner_overshoot` of each episode on the route ``target`` of a
+    cnt-evaluate directory (the held-out route's waypoints: the results' frame starts the
+    route at the origin, as the held-out routes do)."""
+    from cnt_env.task import routes
+
+    waypoints = routes.held_out(target).waypoints
+    per: dict[str, list[list[float]]] = defaultdict(list)
+    for r, trace, _, width in _episodes(results, lambda r: r["target"] == target):
+        per[r["policy"]].append(corner_overshoot(trace, waypoints, width))
+    return dict(per)
+
+
 def legs(results: Path, target: str) -> dict[str, list[list[float]]]:
     """Per policy, the mean per episode of :func:`outside_by_leg` on the route
     ``target`` of a cnt-evaluate directory."""
@@ -133,7 +168,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--legs", metavar="ROUTE", help="instead: the outside length per leg of this route and side"
     )
+    ap.add_argument(
+        "--corners",
+        type=csv_list,
+        metavar="ROUTES",
+        help="instead: how far the trace runs past each corner of these routes",
+    )
     args = ap.parse_args(argv)
+    if args.corners:
+        for d in args.results:
+            for target in args.corners:
+                per = corners(d, target)
+                n = len(next(iter(per.values()))[0]) if per else 0
+                print(f"## {d}: {target}, L_vb past each corner (episodes, then their mean)")
+                print("| policy | " + " | ".join(f"corner {j + 1}" for j in range(n)) + " |")
+                print("|---|" + "---|" * n)
+                for p, eps in per.items():
+                    cols = np.array(eps).T
+                    print(f"| {p} | " + " | ".join(
+                        " / ".join(f"{x:.1f}" for x in c) + f" ({np.mean(c):.1f})"
+                        for c in cols) + " |")  # fmt: skip
+                print()
+        return 0
     if args.legs:
         for d in args.results:
             by = legs(d, args.legs)

@@ -82,3 +82,16 @@ def test_outside_by_leg_finds_each_excursion_and_its_side() -> None:
     # the mirror image (z -> -z) swaps the sides
     mirror = ow.outside_by_leg(trace * [1, -1], route * [1, -1], 20.0)
     assert np.allclose(mirror, by[:, ::-1])
+
+
+def test_corner_overshoot_measures_a_run_past_each_corner() -> None:
+    """An L route (0,0)-(50,0)-(50,60), half-width 15. A trace that runs along x to 62,
+    comes back and climbs overshot the corner by 12; its later swing out to x = 80 near
+    the first leg's line comes after it reached the next leg's midpoint (50, 30) and is
+    not counted. A trace that cuts the corner along (40,0)-(48,30) leaves the first leg's
+    band (|z| <= 15) at x = 44: 6 early (-6, to the nodes' 0.5 spacing)."""
+    wp = np.array([[0.0, 0.0], [50.0, 0.0], [50.0, 60.0]])
+    late = _trace([(0, 0), (62, 0), (55, 5), (50, 40), (50, 60), (80, 5)])
+    assert ow.corner_overshoot(late, wp, 15.0) == pytest.approx([12.0])
+    early = _trace([(0, 0), (40, 0), (48, 30), (50, 60)])
+    assert ow.corner_overshoot(early, wp, 15.0) == pytest.approx([-6.0], abs=0.2)
