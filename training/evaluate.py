@@ -304,13 +304,20 @@ def _save_results(out: Path, results: Sequence[dict[str, Any]]) -> None:
     np.savez_compressed(out / "traces.npz", **arrays)
 
 
+def _episode_key(row: Mapping[str, Any]) -> tuple[str, str, int]:
+    """An episode's (policy, target, seed)."""
+    return row["policy"], row["target"], int(row["seed"])
+
+
 def _load_results(
-    path: Path, skip: set[str], custom: Mapping[str, routes.Route] | None = None
-) -> list[dict[str, Any]]:
-    """Episodes saved by a previous run in ``path`` whose policy is not in ``skip`` and
-    whose target is the same route as now: a name of ``custom`` (``--route-file``) only
-    where that run recorded the same route for it, any other name only where it was not a
-    route of a file there (its ``summary.json``'s ``custom_routes``)."""
+    path: Path, wanted: set[tuple[str, str, int]],
+    custom: Mapping[str, routes.Route] | None = None,
+) -> list[dict[str, Any]]:  # fmt: skip
+    """Episodes saved by a previous run in ``path`` whose (policy, target, seed) is in
+    ``wanted`` and whose target is the same route as now: a name of ``custom``
+    (``--route-file``) only where that run recorded the same route for it, any other name
+    only where it was not a route of a file there (its ``summary.json``'s
+    ``custom_routes``). Only their traces are read."""
     rows = json.loads((path / "episodes.json").read_text())
     data = np.load(path / "traces.npz")
     summary = path / "summary.json"
@@ -318,7 +325,7 @@ def _load_results(
     ours = {t: json.loads(json.dumps(r.to_dict())) for t, r in (custom or {}).items()}
     return [{"row": row, "trace": data[f"trace_{i}"], "target_points": data[f"target_{i}"],
              "episode_file": None}
-            for i, row in enumerate(rows) if row["policy"] not in skip
+            for i, row in enumerate(rows) if _episode_key(row) in wanted
             and theirs.get(row["target"]) == ours.get(row["target"])]  # fmt: skip
 
 
@@ -634,10 +641,8 @@ def evaluate(
     wanted = {(p, t, int(s)) for p in policies for t in targets for s in seeds}
     old: dict[tuple[str, str, int], dict[str, Any]] = {}
     for d in reuse:
-        for r in _load_results(Path(d), set(), custom):
-            key = (r["row"]["policy"], r["row"]["target"], int(r["row"]["seed"]))
-            if key in wanted:
-                old.setdefault(key, r)
+        for r in _load_results(Path(d), wanted, custom):
+            old.setdefault(_episode_key(r["row"]), r)
     reused = {p for p in policies if p not in redo
               and all((p, t, int(s)) in old for t in targets for s in seeds)}  # fmt: skip
     if reused:
