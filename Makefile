@@ -17,7 +17,7 @@ help:
 	@echo "make demo      create .venv, install everything (torch 2.13.0 CPU first), run the main job"
 	@echo "make test      create .venv, install everything, run the test suite (not slow)"
 	@echo "make test-all  the test suite including slow physics validations"
-	@echo "make test-ray  install the [ray] extra and run the RLlib test (slow)"
+	@echo "make test-ray  install the [ray] extra and run the Ray tests (RLlib, sweep, reproduce)"
 	@echo "make lint      ruff check + ruff format --check"
 	@echo "make venv      only create/update .venv"
 	@echo "make clean     remove .venv and caches"
@@ -51,12 +51,15 @@ test-all: $(STAMP)
 	@$(call run_pytest,-q)
 
 RAY_STAMP := $(VENV)/.installed-ray
+# the Ray backends of sweep and reproduce (skipped by test and test-all without ray)
+RAY_TESTS := tests/test_sweep.py::test_ray_backend_runs_the_same_points \
+	tests/test_reproduce.py::test_ray_backend_gives_the_same_points
 $(RAY_STAMP): $(STAMP)
 	$(VPY) -m pip install -e ".[ray]"
 	touch $(RAY_STAMP)
 
 test-ray: $(RAY_STAMP)
-	@$(call run_pytest,-q -m slow tests/test_rllib.py)
+	@$(call run_pytest,-q tests/test_rllib.py $(RAY_TESTS))
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -427,6 +427,30 @@ def test_simulation_failure_is_a_clean_penalised_termination(kw: dict) -> None:
     assert "failure" not in env.step(np.zeros(2, np.float32))[-1]
 
 
+def test_a_non_finite_state_is_a_reported_failure_not_a_nan_observation(kw: dict) -> None:
+    """A simulator state that turns non-finite without raising (here: the top node's
+    position poisoned after a step) ends the episode with ``info["failure"]``, a finite
+    observation and the failure penalty, never a NaN handed to the agent."""
+    env = make(kw, failure_penalty=0.5)
+    env.reset(seed=1)
+    env.step(np.array([0.5, 0.5], np.float32))
+    sim = env.unwrapped.sim
+    advance = sim.advance
+
+    def poisoned(duration: float) -> None:
+        advance(duration)
+        sim.rod.q[4 * (sim.rod.n_nodes - 1)] = np.nan  # x of the top node
+
+    sim.advance = poisoned
+    obs, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], np.float32))
+    assert terminated and not truncated and not info["is_success"]
+    assert info["failure"] == "non-finite simulator state"
+    assert info["reward_failure"] == -0.5 and reward == pytest.approx(-0.5)
+    assert reward == sum(info[k] for k in REWARD_KEYS)
+    assert np.all(np.isfinite(obs)) and obs in env.observation_space
+    assert all(np.isfinite(v) for k, v in info.items() if k.startswith("reward_"))
+
+
 def test_a_real_newton_failure_ends_the_episode_cleanly(kw: dict) -> None:
     """One Newton iteration and no dt halving: the solver gives up at once (also in the
     random advance at reset, which then starts from the warm state itself)."""

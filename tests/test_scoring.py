@@ -68,6 +68,31 @@ def test_route_laid_inside_the_corridor_scores_one() -> None:
     assert float(np.sum(score.potentials(m))) == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("stride", [1, 3, 7])
+def test_route_incremental_equals_batch_whatever_is_frozen(stride: int) -> None:
+    """The env updates the corridor score step by step, re-walking the nodes that may
+    still move; pads crossed at the frozen boundary, shorts, coverage and progress must
+    come out as a batch walk of the final trace gives them."""
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore
+
+    rng = np.random.default_rng(1)
+    line = _along(U, 0.7)
+    trace = line + rng.normal(0.0, 6.0, line.shape)  # zigzags across pads and the corridor
+    pads = np.array([[[20.0, -8.0], [20.0, 8.0]], [[52.0, 20.0], [68.0, 20.0]],
+                     [[30.0, 32.0], [30.0, 48.0]]])  # fmt: skip
+    keep = (rectangle(35.0, 5.0, 45.0, 12.0), rectangle(62.0, 25.0, 70.0, 35.0))
+    whole = RouteScore(U, 6.0, pads, keep).update(trace, len(trace))
+    assert whole["pads_crossed"] == 3 and whole["shorts"] > 0 and 0 < whole["inside"] < 1
+    for lag in (0, 1, 2, 5):  # nodes still moving behind the newest
+        inc = RouteScore(U, 6.0, pads, keep)
+        for n in [*range(1, len(trace), stride), len(trace)]:
+            m = inc.update(trace[:n], max(0, n - lag))
+            batch = RouteScore(U, 6.0, pads, keep).update(trace[:n], n)
+            for k in batch:
+                assert m[k] == pytest.approx(batch[k], rel=1e-12, abs=0.0), (k, lag, n)
+
+
 def test_route_progress_cannot_skip_a_fold() -> None:
     from cnt_env.task.scoring import RouteScore
 
