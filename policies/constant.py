@@ -54,16 +54,17 @@ def record_constant(env, vbar: float, phi: float, seed: int, max_steps: int) -> 
     base = env.unwrapped
     action = action_from_flow(vbar, phi, base.vbar_max)
     env.reset(seed=seed, options={"target": UNREACHABLE})
+    # the contact point at reset, where the env puts a route's start: the node laid last
+    # before reset may still slide on the stepped substrate, so not its final position
+    origin = base.target_path[0]
     n_after = []
     for _ in range(max_steps):
         _, _, terminated, truncated, info = env.step(action)
         n_after.append(info["n_laid"])
         if terminated or truncated:
             break
-    trace = base.sim.trace()
-    n0 = base.episode_start
-    origin = trace[n0 - 1, [0, 2]]
-    return ConstantTrace(vbar, phi, seed, trace[n0:, [0, 2]] - origin, np.array(n_after))
+    trace = base.sim.trace()[base.episode_start :, [0, 2]]
+    return ConstantTrace(vbar, phi, seed, trace - origin, np.array(n_after))
 
 
 def search(

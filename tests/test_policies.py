@@ -70,21 +70,55 @@ def test_scripted_points_along_the_target_and_slows_for_wide_targets() -> None:
     assert pol.speed_for(float(a.max())) <= pol.speed_for(float(a.min()))
 
 
+def _constant_episode(env: gymnasium.Env, target: object) -> dict:
+    env.reset(seed=2, options={"target": target})
+    pol = ConstantPolicy(0.1, 0.7, env.unwrapped.vbar_max)
+    for _ in range(30):
+        _, _, term, trunc, info = env.step(pol.act(None))
+        if term or trunc:
+            break
+    return info
+
+
 def test_offline_score_matches_the_env() -> None:
+    """The constant-flow search scores one recorded trace offline against every target;
+    it must give the env's own score of that flow, to the last bit (thin targets)."""
     env = gymnasium.make("CNTDeposit-v0", max_episode_steps=30, **SMALL)
     ct = record_constant(env, 0.1, 0.7, seed=2, max_steps=30)
     base = env.unwrapped
     for name in ("jog", "s_curve"):
         off = score_trace(ct.trace, T.held_out(name).points, base.tolerance,
                           tuple(base.weights), ct.n_after_step)  # fmt: skip
-        env.reset(seed=2, options={"target": name})
-        pol = ConstantPolicy(0.1, 0.7, base.vbar_max)
-        for _ in range(30):
-            _, _, term, trunc, info = env.step(pol.act(None))
-            if term or trunc:
-                break
-        assert off["score"] == pytest.approx(info["score"], abs=0.02)
-        assert off["precision"] == pytest.approx(info["precision"], abs=0.02)
+        info = _constant_episode(env, name)
+        for k in ("score", "coverage", "precision", "progress"):
+            assert off[k] == info[k], k
+    env.close()
+
+
+def test_offline_route_score_matches_the_env() -> None:
+    """The same for routes (``score_route_trace``), with pads, a keep-out and trace
+    outside the corridor. The trace is taken relative to the contact point at reset: the
+    node laid last before it still slides (sliding B, along z), and measuring from its
+    final position shifted the offline trace against the env's route."""
+    from cnt_env.task import routes
+    from cnt_env.task.scoring import score_route_trace
+
+    env = gymnasium.make("CNTDeposit-v0", max_episode_steps=30, **{**SMALL, "score": "corridor"})
+    ct = record_constant(env, 0.1, 0.7, seed=2, max_steps=30)
+    cases = [
+        {"waypoints": [[0, 0], [12, 0], [12, 12]], "width": 3.0,
+         "pads": [[[6, -2], [6, 2]]], "keepouts": [{"rect": [3, 2.5, 8, 6]}]},
+        {"waypoints": [[0, 0], [20, 20]], "width": 2.0},
+    ]  # fmt: skip
+    precisions = []
+    for case in cases:
+        route = routes.from_dict(case)
+        off = score_route_trace(ct.trace, route, ct.n_after_step)
+        info = _constant_episode(env, route)
+        for k in ("score", "coverage", "precision", "progress", "shorts", "completed"):
+            assert off[k] == info[k], k
+        precisions.append(info["precision"])
+    assert min(precisions) < 0.6  # the diagonal's trace is mostly outside its corridor
     env.close()
 
 
