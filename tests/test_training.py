@@ -96,6 +96,41 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
     assert (tmp_path / "traces_u_turn.png").is_file()
 
 
+@pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
+def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> None:
+    """``model_paths`` (cnt-demo's short run): a policy name whose model is not
+    ``<models>/<name>.zip`` plays that model, episode for episode as under its own name."""
+    from training.common import load_config
+    from training.evaluate import evaluate
+
+    config = load_config(PRETRAINED_DIR / "ppo.yml")
+    config["env_kwargs"]["max_episode_steps"] = 4
+    by_dir = evaluate(["ppo"], ["u_turn"], [0, 1], config, tmp_path / "a", jobs=1)
+    by_path = evaluate(
+        ["short"],
+        ["u_turn"],
+        [0, 1],
+        config,
+        tmp_path / "b",
+        jobs=1,
+        models=tmp_path / "empty",
+        model_paths={"short": PRETRAINED_DIR / "ppo.zip"},
+    )
+    assert [r["policy"] for r in by_path] == ["short"] * len(by_path)
+    assert [r["score_mean"] for r in by_path] == [r["score_mean"] for r in by_dir]
+    with pytest.raises(FileNotFoundError, match="no short model"):
+        evaluate(
+            ["short"],
+            ["u_turn"],
+            [0],
+            config,
+            tmp_path / "c",
+            jobs=1,
+            models=tmp_path / "empty",
+            model_paths={"short": tmp_path / "none.zip"},
+        )
+
+
 def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     """rl-zoo config forms (normalize: true, lin_ schedule, string policy_kwargs,
     max_episode_steps under env_kwargs, callbacks, a curriculum), best_model.zip, VecNormalize as

@@ -7,11 +7,11 @@
    model, VecNormalize stats, checkpoints, learning curve and tensorboard logs land in
    ``<out>/runs/ppo_s0``), to show the pipeline working end to end.
 2. Evaluation of random, constant (the committed grid-search choice,
-   ``training/results/constant_best.json``), the scripted route follower and the
-   pretrained residual PPO (``policies/pretrained``, trained on the fast surrogate) on
-   held-out routes with 3 seeds, on the env's default physics (``eval.yml``): the
-   table, ``summary.json`` and the trace plots in ``<out>/results``, the learning curve of
-   step 1.
+   ``training/results/constant_best.json``), the scripted route follower, the
+   pretrained residual PPO (``policies/pretrained``, trained on the fast surrogate) and
+   step 1's model (``ppo_short``) on held-out routes with 3 seeds, on the env's default
+   physics (``eval.yml``): the table, ``summary.json`` and the trace plots in
+   ``<out>/results``, the learning curve of step 1.
 3. A rerun recording per policy and target (first seed) in ``<out>/rrd`` when rerun is
    installed (``pip install -e ".[rerun]"``), else a message.
 
@@ -52,6 +52,8 @@ DEMO_EVAL_CONFIG = "eval.yml"
 DEMO_MODELS = ("ppo_residual",)
 #: Share of the budget given to the short training run.
 TRAIN_SHARE = 0.25
+#: The name of the short run's model in the evaluation table.
+SHORT_RUN = "ppo_short"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,6 +91,11 @@ def main(argv: list[str] | None = None) -> int:
         runs.append(args.out / "runs" / "ppo_s0")
     policies = ["random", "constant", "scripted"]
     policies += [p for p in DEMO_MODELS if (PRETRAINED / f"{p}.zip").is_file()]
+    # the short run's final model is evaluated too, beside the pretrained one
+    short = {}
+    if runs and (runs[0] / "ppo.zip").is_file():
+        short[SHORT_RUN] = runs[0] / "ppo.zip"
+    policies += list(short)
     print(f"[demo] 2/3 evaluation of {policies} on {targets}, seeds {args.seeds}")
     evaluate(
         policies,
@@ -102,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         jobs=args.jobs,
         save_episodes=args.out / "episodes",
         rrd=None if args.no_rrd else args.out / "rrd",
+        model_paths=short,
     )
     print(f"[demo] 3/3 done in {time.perf_counter() - t0:.0f} s; see {args.out}/results")
     return 0

@@ -617,10 +617,12 @@ def evaluate(
     video: Path | None = None,
     video_format: str = "mp4",
     custom_routes: Mapping[str, routes.Route] | None = None,
+    model_paths: Mapping[str, Path] | None = None,
 ) -> list[dict[str, Any]]:
     """Run the evaluation and write the tables and plots (module doc). Returns the table.
     ``custom_routes``: routes by name (``--route-file``, corridor task) that ``targets``
-    may name besides the held-out ones."""
+    may name besides the held-out ones. ``model_paths``: the model of a policy name that
+    is not ``<models>/<name>.zip`` (``cnt-demo``'s short run)."""
     limit_threads()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -667,7 +669,7 @@ def evaluate(
             if trained:
                 from policies.sb3 import check_model
 
-                model = Path(models) / f"{p}.zip"
+                model = Path((model_paths or {}).get(p) or Path(models) / f"{p}.zip")
                 if not model.is_file():
                     raise FileNotFoundError(f"no {p} model at {model} (--models); train one "
                                             "with cnt-train")  # fmt: skip
@@ -677,7 +679,7 @@ def evaluate(
                 if p == "constant":
                     spec.update(vbar=best[t]["vbar"], phi=best[t]["phi"])
                 if trained:
-                    spec["model"] = str(Path(models) / f"{p}.zip")
+                    spec["model"] = str(model)
                     spec["trust"] = bool(trust)
                 specs[p] = spec
                 for s in seeds:
