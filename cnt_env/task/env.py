@@ -91,10 +91,11 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     adhesion makes it stick (docs/model.md §1, §4). The shape it leaves, the *trace*, is a
     coil on a flat sticky substrate and a serpentine on a stepped one with flow (§5-6).
     The agent sets the rarefied gas flow in the substrate plane every control interval.
-    The flow steers the pattern's *drift*: across the steps (±x) a serpentine band 26-39
-    L_vb wide drifts 0.16-0.27 L_vb per L_vb of trace at v̄ = 0.13; along them (±z) an
-    almost straight run drifts 0.62-0.76 (benchmarks/results/step_response_surrogate.json,
-    docs/task.md).
+    The flow steers the pattern's *drift*: on the default physics (the model), across
+    the steps (±x) a serpentine band ~33-40 L_vb wide drifts 0.17-0.30 L_vb per L_vb of
+    trace at v̄ 0.065-0.13; along them (±z) an almost straight run drifts 0.82-1.0
+    (benchmarks/results/step_response.json; the fast surrogate's figures, on which the
+    task's widths and rates were set, are in docs/task.md).
 
     The task (``score="corridor"``, default; docs/task.md): lay the trace along a circuit
     route (:class:`~cnt_env.task.routes.Route`): waypoints from the contact point, a
@@ -113,9 +114,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     bound acts exactly like the bound); a NaN or infinite action raises ``ValueError`` and
     leaves the env untouched. The flow is held for ``control_interval`` (tau), simulated
     as ``n_substeps`` physics steps of ``dt``. Default: 30 H̄ (~24 L_vb of trace) for
-    routes, no more than the median trace laid before the suspended rod leans the new
-    way after a switch of direction (step response: 23-27 L_vb when chosen, 28-44 on the
-    shipped simulator; docs/task.md); 1.5 H̄ (~1.2 L_vb) for ``score="thin"``.
+    routes, about the trace laid before the suspended rod leans the new way after a
+    switch of direction (step response: 23-27 L_vb when chosen; a median 9-31 on the
+    shipped simulator, noisy, single switches 1-160; docs/task.md); 1.5 H̄ (~1.2 L_vb)
+    for ``score="thin"``.
 
     ## Observation Space
 
@@ -193,8 +195,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     observation stays finite, stepping again repeats the terminal step with reward 0).
 
     Truncation: routes end after ``max_episode_steps`` (set at reset,
-    :meth:`episode_steps_for`): 1.5 · route length / (0.2 L_vb per L_vb · trace per
-    step) + 10, 158 steps for the 160 L_vb U-turn. ``gymnasium.make`` also wraps the env
+    :meth:`episode_steps_for`): 1.5 · route length / (``routes.PROGRESS_RATE`` = 0.17
+    L_vb per L_vb · trace per step) + 10, 83 steps for the held-out ``u_turn`` (197
+    L_vb). ``gymnasium.make`` also wraps the env
     in a ``TimeLimit`` of 400 steps (the thin task's ~400 L_vb).
 
     ## Arguments
