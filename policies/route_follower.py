@@ -170,7 +170,7 @@ from collections import deque
 
 import numpy as np
 
-from cnt_env.task.geometry import inside_polygon, nearest_on_boundary
+from cnt_env.task.geometry import inside_polygon, nearest_on_boundary, outward_normal
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
 
@@ -257,6 +257,7 @@ class RouteFollower:
         self._bands: deque[np.ndarray] = deque(maxlen=max(1, self.band_memory))
         # the directions of the last flows given (at least the last one, for ``hooked``)
         self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))
+        self._played: float | None = None
         self._run = False  # whether the centre is a run's (its contact point)
         self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
@@ -296,6 +297,7 @@ class RouteFollower:
             self._bands.clear()
             self._prev_centre = self._prev_contact = None
             self._phis.clear()
+            self._played = None
             self._run = False
             self._first = True
             self._route_pts, self._route_s = resample(route.waypoints, self.plan_spacing)
@@ -444,9 +446,10 @@ class RouteFollower:
         if contact is None or self.unhook == 0.0:
             return False
         prev, self._prev_contact = self._prev_contact, contact.copy()
-        if prev is None or not self._phis:
+        if prev is None or self._played is None:
             return False
-        sign = steps_sign(self._phis[-1])  # the last flow
+        # the flow played last, the start flow included: the contact moved under it
+        sign = steps_sign(self._played)
         dx, dz = contact - prev
         return sign != 0 and abs(dx) <= 0.5 * abs(dz) and dz * sign < -self.hook_tol
 
@@ -497,12 +500,14 @@ class RouteFollower:
         phi = math.atan2(aim[1], aim[0])
         if self.hooked(contact):
             phi += self.unhook_turn(phi)
-        self._phis.append(phi)
+        self._phis.append(phi)  # the follower's own flows: its run memory (laying_run)
+        self._played = phi  # the flow played: what the contact moved under (hooked)
         if first and self.start_swing:
             k = min(len(self._route_pts) - 1, max(1, round(10.0 / self.plan_spacing)))
             lead = self._route_pts[k] - self._route_pts[0]  # the route's first 10 L_vb
             start = start_flow(past, o[self.slices["flow"]], lead)
             if start is not None:
+                self._played = start
                 return action_from_flow(self.vbar_max, start, self.vbar_max)
         return action_from_flow(vbar, phi, self.vbar_max)
 
@@ -569,6 +574,8 @@ def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3
             inside = inside_polygon(out, poly)
             n = np.where(dist[:, None] > 1e-9, v / np.maximum(dist, 1e-9)[:, None], 0.0)
             n[inside] *= -1.0
+            for i in np.flatnonzero(dist <= 1e-9):  # on the boundary: its outward normal
+                n[i] = outward_normal(out[i], poly)
             r = np.abs(n) @ reach
             move = inside | (dist < r)
             out[move] = near[move] + r[move, None] * n[move]

@@ -11,6 +11,7 @@ from cnt_env.task.geometry import (
     inside_polygon,
     nearest_on_boundary,
     nearest_on_polygons,
+    outward_normal,
     pack,
 )
 
@@ -53,3 +54,29 @@ def test_nearest_on_polygons_picks_the_nearest_polygon_and_far_without_any() -> 
     np.testing.assert_allclose(nearest_on_polygons(p, (SQUARE, far_right)), [10.0, 5.0])
     np.testing.assert_allclose(nearest_on_polygons(p, (near_right, SQUARE)), [23.0, 5.0])
     np.testing.assert_allclose(nearest_on_polygons(p, ()), p + FAR)
+
+
+def test_a_repeated_vertex_is_a_point_of_the_boundary_not_a_nan() -> None:
+    """A closed ring (first vertex repeated at the end) or a repeated vertex has an edge
+    of length zero: the nearest point is the same as for the open polygon (it was 0 / 0,
+    and argmin picked the NaN)."""
+    pts = np.array([[5.0, -3.0], [13.0, 14.0], [5.0, 4.0], [0.0, 0.0]])
+    closed = np.vstack([ELL, ELL[:1]])
+    doubled = np.insert(ELL, 2, ELL[2], axis=0)
+    for poly in (closed, doubled):
+        near, d = nearest_on_boundary(pts, poly)
+        ref_near, ref_d = nearest_on_boundary(pts, ELL)
+        np.testing.assert_array_equal(near, ref_near)
+        np.testing.assert_array_equal(d, ref_d)
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_outward_normal_points_out_of_each_edge_whatever_the_winding(order: int) -> None:
+    poly = ELL[::order]
+    cases = {(5.0, 0.0): (0, -1), (10.0, 2.0): (1, 0), (7.0, 5.0): (0, 1),
+             (5.0, 8.0): (1, 0), (2.0, 10.0): (0, 1), (0.0, 6.0): (-1, 0)}  # fmt: skip
+    for point, normal in cases.items():
+        np.testing.assert_allclose(outward_normal(np.array(point), poly), normal, atol=1e-12)
+    # a closed ring: its zero-length edge is skipped
+    np.testing.assert_allclose(outward_normal(np.array([5.0, 0.0]), np.vstack([poly, poly[:1]])),
+                               [0, -1], atol=1e-12)  # fmt: skip

@@ -204,6 +204,12 @@ def test_plan_around_moves_the_route_off_a_keep_out_by_the_reach() -> None:
     assert out[4] == pytest.approx(np.array([10.0, 10.0]) + (n @ reach) * n)
     # idempotent: a planned route is already clear
     assert plan_around(out, (square,), reach) == pytest.approx(out)
+    # on the boundary (a route along the edge, which may touch it): out along the edge's
+    # normal, as from just outside it (it stayed where it was: no direction at distance 0)
+    on_edge = np.array([[5.0, 10.0], [10.0, 3.0], [0.0, 0.0]])
+    out = plan_around(on_edge, (square,), reach)
+    assert out[0] == pytest.approx([5.0, 16.0]) and out[1] == pytest.approx([12.0, 3.0])
+    assert out[2] == pytest.approx([0.0, -6.0])  # a corner: a tie, the first edge (z = 0)
 
 
 def test_route_follower_plan_only_acts_where_there_are_keep_outs() -> None:
@@ -403,7 +409,7 @@ def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
 
     def after(step: list[float], phi: float = math.pi / 2, **kw) -> bool:
         pol = RouteFollower(layout.slices, 0.13, **kw)
-        pol._phis.append(phi)  # the last flow (default: along +z)
+        pol._played = phi  # the last flow played (default: along +z)
         assert not pol.hooked(np.array([5.0, 10.0]))  # the first contact: nothing to compare
         return pol.hooked(np.array([5.0, 10.0]) + np.array(step))
 
@@ -424,6 +430,32 @@ def test_route_follower_unhooks_a_run_that_goes_against_the_flow() -> None:
             RouteFollower(layout.slices, 0.13, unhook=bad)
     with pytest.raises(ValueError, match="hook_tol"):
         RouteFollower(layout.slices, 0.13, hook_tol=-1.0)
+
+
+def test_the_hook_test_after_the_start_flow_uses_the_flow_played() -> None:
+    """The first step of a route plays the start flow, not the follower's own: the next
+    step's hook test must compare the contact's motion with the start flow. (It compared
+    it with the follower's own flow, here ~170° away, and took the run laid with the
+    start flow along +z for a run hooked against a flow along -z: a false unhook.)"""
+    from policies import RouteFollower
+
+    env = gymnasium.make("CNTDeposit-v0", drag_law="printed", delta_bar=1.0)
+    base = env.unwrapped
+    obs, _ = env.reset(seed=3, options={"target": {"waypoints": [[0, 0], [0, -100]]}})
+    pol = RouteFollower.from_env(env)
+    pol.reset(3)
+    checks: list[bool] = []
+    hooked = pol.hooked
+    pol.hooked = lambda contact: checks.append(hooked(contact)) or checks[-1]
+    action = pol.act(obs)
+    played, own = flow_from_action(action, base.vbar_max)[1], pol._phis[-1]
+    assert math.sin(played) > 0.9 and math.sin(own) < -0.9  # +z played, -z intended
+    z0 = base.sim.trace()[-1, 2]
+    obs, *_ = env.step(action)
+    assert base.sim.trace()[-1, 2] - z0 > 3 * pol.hook_tol  # a run along +z, with the flow
+    pol.act(obs)
+    assert checks == [False, False]
+    env.close()
 
 
 def test_route_follower_unhooks_away_from_the_steps_axis() -> None:

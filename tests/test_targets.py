@@ -308,6 +308,32 @@ def test_a_route_beside_its_keepouts_and_pads_at_the_corridor_edge_is_accepted()
                 routes.draw(fam, rng, d)
 
 
+def test_a_closed_keepout_ring_is_the_open_polygon_and_edges_are_touching() -> None:
+    """GeoJSON writes a polygon's ring closed (the first vertex again at the end): the
+    route keeps the polygon with its zero-length edges dropped, so the follower's plan
+    and the observation see it (a closed ring made them NaN, and the follower shorted
+    detour_block on every seed). A waypoint on a keep-out's edge or corner touches it,
+    whichever edge (the even-odd rule counts some edges in); fewer than three distinct
+    vertices is refused."""
+    from cnt_env.task import routes
+
+    ring = [[45, -8], [75, -8], [75, 21], [45, 21]]
+    spec = {"waypoints": [[0, 0], [30, 0], [30, 36], [90, 36], [90, 0], [120, 0]]}
+    closed = routes.from_dict({**spec, "keepouts": [[*ring, ring[0]]]})
+    doubled = routes.from_dict({**spec, "keepouts": [[*ring[:2], ring[1], *ring[2:]]]})
+    for r in (closed, doubled):
+        np.testing.assert_array_equal(r.keepouts[0], np.array(ring, dtype=float))
+    # the route's start on each edge and two corners of a 10 x 10 square, leaving it
+    for x, z in ([0, 5], [5, 0], [10, 5], [5, 10], [0, 0], [10, 10]):
+        away = (20.0 * np.sign(x - 5.0), 20.0 * np.sign(z - 5.0))
+        routes.from_dict({"waypoints": [[0, 0], away],
+                          "keepouts": [{"rect": [-x, -z, 10 - x, 10 - z]}]})  # fmt: skip
+    with pytest.raises(ValueError, match="3 distinct"):
+        routes.from_dict({**spec, "keepouts": [[[45, -8], [75, -8], [45, -8]]]})
+    with pytest.raises(ValueError, match="inside keep-out"):
+        routes.from_dict({"waypoints": [[0, 0], [20, 0]], "keepouts": [{"rect": [-1, -1, 1, 1]}]})
+
+
 def test_segment_distance_and_crossing_against_closed_forms() -> None:
     from cnt_env.task.geometry import segment_distance, segments_cross
 

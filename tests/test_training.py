@@ -131,6 +131,21 @@ def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> No
         )
 
 
+@pytest.mark.parametrize("bad", [True, 2.9, "300", 0, -3, None])
+def test_the_episode_cap_must_be_a_positive_integer_as_written(bad) -> None:
+    """``env_kwargs.max_episode_steps`` is checked before any conversion: true, 2.9 or
+    "300" are mistakes in a YAML file, not 1, 2 or 300 (int() had accepted them)."""
+    from training.common import check_run_config, env_settings
+
+    config = {"n_timesteps": 10, "env_kwargs": {"max_episode_steps": bad}}
+    if bad is None:  # absent: the default cap
+        assert env_settings(config)[1] > 0
+        return
+    for check in (env_settings, check_run_config):
+        with pytest.raises(ValueError, match="max_episode_steps must be a positive integer"):
+            check(config)
+
+
 def test_route_task_run_with_zoo_conventions(tmp_path: Path) -> None:
     """rl-zoo config forms (normalize: true, lin_ schedule, string policy_kwargs,
     max_episode_steps under env_kwargs, callbacks, a curriculum), best_model.zip, VecNormalize as

@@ -111,10 +111,9 @@ def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
 def check_run_config(config: dict[str, Any]) -> None:
     """Refuse a config whose run cannot start: ``n_timesteps`` and ``n_envs`` positive
     integers, and an episode cap (``env_kwargs.max_episode_steps``) of at least 1."""
-    _, steps = env_settings(config)
+    env_settings(config)  # the episode cap
     for key, value in (("n_timesteps", config.get("n_timesteps")),
-                       ("n_envs", config.get("n_envs", 2)),
-                       ("max_episode_steps", steps)):  # fmt: skip
+                       ("n_envs", config.get("n_envs", 2))):  # fmt: skip
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{key} must be a positive integer, got {value!r}")
 
@@ -138,6 +137,9 @@ def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
     steps = env_kwargs.pop("max_episode_steps", None)
     if steps is None:
         steps = config.get("max_episode_steps", DEFAULT_MAX_EPISODE_STEPS)
+    # checked here, before any conversion: true, 2.9 or "300" are mistakes, not 1, 2, 300
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"max_episode_steps must be a positive integer, got {steps!r}")
     return env_kwargs, int(steps)
 
 

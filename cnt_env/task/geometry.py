@@ -8,6 +8,7 @@ follower (its plan around keep-outs).
 * :func:`nearest_on_boundary`: for each of n points, the nearest point of one polygon's
   boundary and its distance (the projection on each edge, clipped to the edge);
 * :func:`nearest_on_polygons`: the nearest boundary point over several polygons;
+* :func:`outward_normal`: the outward normal of the edge nearest a point;
 * :func:`inside_polygon` / :func:`count_in_polygons` (polygons packed by :func:`pack`):
   the even-odd rule (a point is inside when a ray along +x crosses the boundary an odd
   number of times), in one compiled kernel;
@@ -18,6 +19,8 @@ follower (its plan around keep-outs).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -27,6 +30,7 @@ __all__ = [
     "inside_polygon",
     "nearest_on_boundary",
     "nearest_on_polygons",
+    "outward_normal",
     "pack",
     "segment_distance",
     "segments_cross",
@@ -37,18 +41,38 @@ __all__ = [
 FAR = 1.0e6
 
 
+def _edge_projections(points: np.ndarray, poly: np.ndarray):
+    """``(q, d, ab)``: each of ``points`` (n, 2) projected on each edge of ``poly`` (k, 2),
+    clipped to the edge (n, k, 2), its distance (n, k), and the edges (k, 2). A
+    zero-length edge (a repeated vertex) projects onto its point: t = 0, not 0 / 0."""
+    a = np.asarray(poly, dtype=np.float64)
+    ab = np.roll(a, -1, axis=0) - a
+    den = np.einsum("kj,kj->k", ab, ab)
+    t = np.einsum("nkj,kj->nk", points[:, None, :] - a[None], ab) / np.where(den > 0, den, 1.0)
+    q = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+    d = np.hypot(q[..., 0] - points[:, None, 0], q[..., 1] - points[:, None, 1])
+    return q, d, ab
+
+
 def nearest_on_boundary(points: np.ndarray, poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(near, dist)``: for each of ``points`` (n, 2), the nearest point (n, 2) of the
     boundary of ``poly`` (k, 2) and its distance (n,)."""
-    a = np.asarray(poly, dtype=np.float64)
-    ab = np.roll(a, -1, axis=0) - a
-    # t of the projection on each edge a + t ab, clipped to the edge
-    t = np.einsum("nkj,kj->nk", points[:, None, :] - a[None], ab) / np.einsum("kj,kj->k", ab, ab)
-    q = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]  # (n, k, 2)
-    d = np.hypot(q[..., 0] - points[:, None, 0], q[..., 1] - points[:, None, 1])
+    q, d, _ = _edge_projections(points, poly)
     i = np.argmin(d, axis=1)
     rows = np.arange(len(points))
     return q[rows, i], d[rows, i]
+
+
+def outward_normal(point: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """The unit normal (2,), pointing out of ``poly``, of its edge nearest ``point``: the
+    way out for a point on the boundary, where the direction from the nearest boundary
+    point is undefined."""
+    _, d, ab = _edge_projections(np.asarray(point, dtype=np.float64)[None], poly)
+    length = np.hypot(ab[:, 0], ab[:, 1])
+    e = ab[int(np.argmin(np.where(length > 0, d[0], np.inf)))]
+    n = np.array([e[1], -e[0]]) / math.hypot(*e)
+    step = 1e-6 * (1.0 + float(np.abs(np.asarray(poly)).max()))
+    return -n if inside_polygon((point + step * n)[None], poly)[0] else n
 
 
 def nearest_on_polygons(point: np.ndarray, polygons: tuple[np.ndarray, ...]) -> np.ndarray:

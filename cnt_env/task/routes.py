@@ -164,6 +164,13 @@ class Route:
                 raise ValueError(f"a keep-out is a polygon of >= 3 (x, z) points, got {poly.shape}")
             if not np.isfinite(poly).all():
                 raise ValueError("keep-out polygons must be finite")
+            # a closed ring (the first vertex repeated at the end, as GeoJSON writes it)
+            # and repeated vertices are the same polygon: drop the zero-length edges
+            keep = np.any(poly != np.roll(poly, -1, axis=0), axis=1)
+            poly = np.ascontiguousarray(poly[keep])
+            if poly.shape[0] < 3:
+                raise ValueError(f"a keep-out needs >= 3 distinct (x, z) points, got "
+                                 f"{poly.shape[0]}")  # fmt: skip
             poly.setflags(write=False)
             keepouts.append(poly)
         _check_consistent(pts, w, pads, keepouts)
@@ -207,7 +214,9 @@ def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
     legs = list(itertools.pairwise(pts))
     fix = "route the waypoints around the keep-out"
     for k, poly in enumerate(keepouts):
-        inside = np.flatnonzero(inside_polygon(pts, poly))
+        # on the boundary is touching, not inside (the even-odd rule counts some edges in)
+        on_edge = nearest_on_boundary(pts, poly)[1] <= 1e-9 * (1.0 + float(np.abs(pts).max()))
+        inside = np.flatnonzero(inside_polygon(pts, poly) & ~on_edge)
         if inside.size:
             i = int(inside[0])
             raise ValueError(f"waypoint {i} {pts[i].tolist()} lies inside keep-out {k}: {fix}")
