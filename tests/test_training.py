@@ -87,8 +87,14 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
     assert {r["policy"] for r in rows} == set(ALL_POLICIES)
     assert {"score_mean", "score_std", "coverage_mean", "normalized_score"} <= set(rows[0])
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert set(summary) == {"policies", "targets", "seeds", "custom_routes"}
+    assert set(summary) == {"policies", "targets", "seeds", "custom_routes", "env_kwargs",
+                            "max_episode_steps", "models"}  # fmt: skip
     assert summary["custom_routes"] == {}
+    # what the episodes ran on: the config's physics (here the surrogate) and models
+    assert summary["env_kwargs"]["drag_law"] == config["env_kwargs"]["drag_law"] == "printed"
+    assert summary["max_episode_steps"] == 4
+    assert summary["models"]["sac"] == str(PRETRAINED_DIR / "sac.zip")
+    assert set(summary["models"]) == {"ppo", "sac"}
     assert summary["targets"] == ["u_turn"] and summary["seeds"] == [0, 1, 2]
     for p in ALL_POLICIES:
         s = summary["policies"][p]
@@ -129,6 +135,24 @@ def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> No
             models=tmp_path / "empty",
             model_paths={"short": tmp_path / "none.zip"},
         )
+
+
+@pytest.mark.parametrize("module", ["training.train", "training.evaluate", "training.demo"])
+def test_a_file_given_as_the_output_directory_is_a_usage_error(
+    module: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:  # fmt: skip
+    """``--out`` naming an existing file: exit 2 with the reason, the file untouched (it
+    was a NotADirectoryError or FileExistsError traceback)."""
+    import importlib
+
+    f = tmp_path / "trace.npz"
+    f.write_bytes(b"data")
+    argv = ["--algo", "ppo"] if module == "training.train" else []
+    with pytest.raises(SystemExit) as exc:
+        importlib.import_module(module).main([*argv, "--out", str(f)])
+    assert exc.value.code == 2
+    assert "is a file; give a directory" in capsys.readouterr().err
+    assert f.read_bytes() == b"data" and list(tmp_path.iterdir()) == [f]
 
 
 @pytest.mark.parametrize("bad", [True, 2.9, "300", 0, -3, None])
@@ -896,6 +920,7 @@ def test_an_option_given_double_dash_is_a_usage_error(
         ("training.evaluate", ["--seeds", "0,-1"], "--seeds: a seed must be ≥ 0"),
         ("training.evaluate", ["--seeds", ","], "--seeds: give at least one seed"),
         ("training.evaluate", ["--targets", "u_turn,nosuch"], "['nosuch']: not held-out"),
+        ("training.evaluate", ["--policies", "random,randum"], "'randum' is neither a baseline"),
         ("training.demo", ["--targets", "nosuch"], "--targets: ['nosuch']: not held-out"),
         ("training.demo", ["--seeds", "-1"], "--seeds: a seed must be ≥ 0"),
         ("training.demo", ["--budget-minutes", "-1"], "finite number > 0"),

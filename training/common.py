@@ -242,6 +242,14 @@ def held_out_names(env_kwargs: dict[str, Any]) -> tuple[str, ...]:
     return routes.HELD_OUT if score_mode(env_kwargs) == "corridor" else targets_mod.HELD_OUT
 
 
+def check_dir_option(parser: argparse.ArgumentParser, dest: str, path: Path | None) -> None:
+    """A usage error (exit 2) when the directory option ``dest`` names an existing file,
+    before anything is made (a directory that does not exist yet is created later)."""
+    if path is not None and Path(path).exists() and not Path(path).is_dir():
+        flag = "--" + dest.replace("_", "-")
+        parser.error(f"{flag}: {path} is a file; give a directory (made if missing)")
+
+
 def fresh_dir(path: str | Path) -> Path:
     """``path`` if it does not exist or is empty, else the first free ``path_2``,
     ``path_3``, ...: a run never overwrites an earlier one. The directory is created."""

@@ -31,6 +31,7 @@ from .common import (
     CHECKPOINT_CALLBACK,
     CONFIG_DIR,
     EVAL_CALLBACK,
+    check_dir_option,
     env_settings,
     held_out_names,
     held_out_targets,
@@ -76,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         targets = held_out_targets(args.targets, held_out_names(env_settings(eval_config)[0]))
     except ValueError as exc:
         p.error(f"--targets: {exc}")
+    check_dir_option(p, "out", args.out)
     config = load_config(CONFIG_DIR / DEMO_CONFIG)
     runs = []
     if not args.no_train:

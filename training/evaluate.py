@@ -58,6 +58,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cnt_env.io import to_jsonable
 from cnt_env.task import routes
 from policies.residual import residual_settings
 from policies.sb3 import frame_stack
@@ -67,6 +68,7 @@ from .common import (
     ENV_ID,
     VALIDATION,
     HeldOutCycle,
+    check_dir_option,
     csv_list,
     env_settings,
     eval_settings,
@@ -705,6 +707,11 @@ def evaluate(
         "targets": list(targets),
         "seeds": [int(s) for s in seeds],
         "custom_routes": {t: custom[t].to_dict() for t in targets if t in custom},
+        # the physics and episode cap the episodes ran on (the surrogate's and the
+        # model's results are otherwise alike), and each trained policy's model file
+        "env_kwargs": to_jsonable(env_kwargs),
+        "max_episode_steps": max_steps,
+        "models": {p: spec["model"] for p, spec in specs.items() if "model" in spec},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
@@ -850,6 +857,13 @@ def main(argv: list[str] | None = None) -> int:
             targets = held_out_targets(args.targets, [*held, *custom])
         except ValueError as exc:
             parser.error(f"--targets: {exc}")
+    for p in csv_list(args.policies):  # before any directory is made
+        if p not in BASELINES and not (args.models / f"{p}.zip").is_file():
+            model = args.models / f"{p}.zip"
+            parser.error(f"--policies: {p!r} is neither a baseline ({', '.join(BASELINES)}) "
+                         f"nor a model: there is no {model} (--models)")  # fmt: skip
+    for flag in ("out", "save_episodes", "rrd", "video"):
+        check_dir_option(parser, flag, getattr(args, flag))
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
     print(f"results -> {out}")
     from policies.sb3 import UntrustedModelError

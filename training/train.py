@@ -71,6 +71,7 @@ from .common import (
     ResidualAction,
     algo_kwargs,
     check_callbacks,
+    check_dir_option,
     check_run_config,
     curriculum_settings,
     env_settings,
@@ -470,6 +471,7 @@ def main(argv: list[str] | None = None) -> int:
         config = _resolved_config(args)
     except (ValueError, OSError) as exc:  # UntrustedModelError is a ValueError
         parser.error(str(exc))
+    check_dir_option(parser, "out", args.out)
     run = fresh_dir(args.out / f"{args.algo}_s{args.seed}")  # never overwrites a run
     train(args.algo, config, run, seed=args.seed, vec_env=args.vec_env,
           max_wall_seconds=args.max_wall_seconds, progress_bar=not args.no_progress,
