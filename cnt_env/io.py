@@ -354,6 +354,8 @@ def check_output_path(value: str | os.PathLike[str], flag: str) -> Path:
     shown = text if len(text) <= 80 else text[:60] + "..." + text[-12:]
     if not text or "\x00" in text:
         raise OutputError(f"{flag}: give a file name, got {shown!r}")
+    if text.endswith(("/", os.sep)):
+        raise OutputError(f"{flag} {shown} ends in '/': pass a file name, not a directory")
     path = Path(text)
     for part in path.parts:
         if len(os.fsencode(part)) > MAX_NAME_BYTES:
@@ -403,9 +405,13 @@ class OutputSet:
             save_trace(tmp, ...)
     """
 
-    def __init__(self) -> None:
+    def __init__(self, inputs: Mapping[str, str | os.PathLike[str] | None] | None = None) -> None:
+        """``inputs``: the command's input files by what they are ("the trace", "--config"):
+        no output may name one (it would be replaced by the output)."""
         self._staged: list[tuple[Path, Path, str]] = []
         self._finals: dict[Path, str] = {}
+        self._inputs = {os.path.realpath(p): what for what, p in (inputs or {}).items()
+                        if p is not None}  # fmt: skip
 
     def check(self, path: str | os.PathLike[str], flag: str) -> Path:
         """Check ``path`` as an output of this set without staging it yet."""
@@ -414,6 +420,10 @@ class OutputSet:
         other = self._finals.get(key)
         if other is not None:
             raise OutputError(f"{flag} and {other} name the same file ({final})")
+        source = self._inputs.get(os.path.realpath(final))
+        if source is not None:
+            raise OutputError(f"{flag} {final} is {source}, an input of this command: the "
+                              "output would replace it; pass another name")  # fmt: skip
         self._finals[key] = flag
         return final
 

@@ -581,3 +581,29 @@ def test_measure_judges_the_class_on_the_settled_fraction_given(
     assert settled["measure"]["settled_amplitude_cv"] < 0.02 < whole["measure"]["amplitude_cv"]
     assert cli.main(["measure", str(path), "--settled-fraction", "0"]) == 2
     assert "--settled-fraction" in capsys.readouterr().err
+
+
+def test_no_output_replaces_an_input_and_a_directory_name_is_refused(
+    tiny_run: dict, tmp_path: Path
+) -> None:  # fmt: skip
+    """An output that names the command's own input (the trace measured or replayed, the
+    --config file) would replace it: exit 2, the input untouched (they were overwritten
+    with exit 0). An output ending in '/' names a directory, not a file (it made a file
+    of that name)."""
+    import shutil
+
+    trace = tmp_path / "t.npz"
+    shutil.copy(tiny_run["out"], trace)
+    shutil.copy(f"{tiny_run['out']}.json", f"{trace}.json")
+    before = trace.read_bytes(), Path(f"{trace}.json").read_bytes()
+    for argv, what in (
+        (["measure", str(trace), "--png", str(trace)], "the trace measured"),
+        (["replay", str(trace), "--video", str(trace)], "the file replayed"),
+        (["run", "--config", f"{trace}.json", "--out", str(trace)], "the --config file"),
+    ):
+        code, _, stderr = _call(argv)
+        assert code == 2 and what in stderr and "would replace it" in stderr, argv
+    assert (trace.read_bytes(), Path(f"{trace}.json").read_bytes()) == before
+    code, _, stderr = _call(["run", *TINY, "--out", f"{tmp_path}/results/"])
+    assert code == 2 and "ends in '/'" in stderr
+    assert not (tmp_path / "results").exists()

@@ -413,5 +413,9 @@ def test_a_csv_from_before_the_settled_columns_resumes(tmp_path: Path, fake_poin
     assert header2 == [header[i] for i in keep] and len(rows) == 2
 
     out.write_text(out.read_text().replace("config_hash", "config_hash,extra", 1))
-    code, stdout, stderr = _call([*grown, "--no-plots", "--json"])
+    record = Path(f"{out}.json").read_bytes()
+    code, stdout, stderr = _call([*grown[:-4], "--values", "100,300", "--out", str(out),
+                                  "--no-plots", "--json"])  # fmt: skip
     _clean(code, stdout, stderr, 2, "--out", "different sweep")
+    # refused before any work: the CSV's record still describes the sweep it holds
+    assert Path(f"{out}.json").read_bytes() == record

@@ -55,7 +55,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     if args.rrd is None and args.video is None:
         raise CliError("give --rrd OUT.rrd, --video OUT.mp4 (or .gif), or both")
-    outputs = OutputSet()
+    outputs = OutputSet(inputs={"the file replayed": args.file})
     rrd = video = None
     if args.rrd is not None:
         rrd = outputs.check(args.rrd, "--rrd")

@@ -133,7 +133,7 @@ def stage_output(outputs: OutputSet, value: str | None, flag: str) -> Path | Non
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    outputs = OutputSet()
+    outputs = OutputSet(inputs={"the --config file": getattr(args, "config", None)})
     try:
         return _run(args, outputs)
     finally:
@@ -201,7 +201,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> int:
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
-    outputs = OutputSet()
+    outputs = OutputSet(inputs={"the trace measured": args.trace})
     try:
         return _measure(args, outputs)
     finally:

@@ -111,12 +111,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         sweep.import_ray()  # a missing extra is a usage error, found before any work
     plan = sweep.resolve_sweep(sweep_options(args), warn=warn)
     config_json = Path(f"{plan.csv_path}.json")
-    with OutputSet() as outputs:
-        outputs.write_text(config_json, "--out", config_json_text(plan.csv_path, plan.resolved))
+    OutputSet().check(config_json, "--out")  # the path now; the file once the CSV is accepted
 
     bar = None
 
     def on_start(n_todo: int, n_skipped: int) -> None:
+        # the CSV passed its checks (a different sweep or a foreign file is refused before
+        # this): only now does its record describe this sweep
+        with OutputSet() as outputs:
+            outputs.write_text(config_json, "--out",
+                               config_json_text(plan.csv_path, plan.resolved))  # fmt: skip
         nonlocal bar
         if not args.json and sys.stderr.isatty() and n_todo:
             from tqdm import tqdm
