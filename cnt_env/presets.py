@@ -165,8 +165,9 @@ RUN_TRANSIENT: MappingProxyType[str, float] = MappingProxyType({"coil": 900.0, "
 #: (patterns.MeasureOptions.settled_fraction, ``--settled-fraction``): a start-up's decay
 #: over its first cycles is not irregularity (RESULTS.md, "Classes of the settled pattern").
 SETTLED_FRACTION: float = 0.5
-#: ``cnt-sim demo``: a small coil, ~15 s after the numba compile.
-DEMO_DEPOSIT: float = 300.0
+#: ``cnt-sim demo``: a coil long enough to measure past its start-up (the second half:
+#: R0 7.475 in ~30 s; 300 L_vb, the length before, was all start-up and measured nothing).
+DEMO_DEPOSIT: float = 1200.0
 
 #: The env's speed settings, on top of the model (RESULTS.md, issue 11). Stepped: 4x the
 #: validated step and 60 L_vb of deposited tail kept in the solve instead of 195
