@@ -219,15 +219,21 @@ def apply_substrate(params: units.DimensionlessParams, substrate: str | None):
     return params
 
 
-def check_group_range(params: units.DimensionlessParams) -> None:
-    """Reject groups outside :data:`GROUP_RANGE` (the model's meaningful range)."""
+def check_group_range(params: units.DimensionlessParams, si: Mapping[str, Any] | None = None
+                      ) -> None:  # fmt: skip
+    """Reject groups outside :data:`GROUP_RANGE` (the model's meaningful range); ``si``:
+    the SI values the groups came from, named in the message (the user typed those)."""
     for name, (lo, hi) in GROUP_RANGE.items():
         value = getattr(params, name)
         if value is not None and not lo <= value <= hi:
             flag = FLAGS.get(name, name)
+            given = {k: v for k, v in (si or {}).items() if v is not None}
+            source = ("; it follows from the SI values given ("
+                      + ", ".join(f"--{k} {v:g}" for k, v in given.items())
+                      + "): check their units (--help)") if given else ""  # fmt: skip
             raise RunInputError(
                 f"{flag} = {value!r} is outside the model's meaningful range [{lo:g}, {hi:g}] "
-                "(beyond it the simulation loses precision or cannot deposit)"
+                f"(beyond it the simulation loses precision or cannot deposit){source}"
             )
 
 
@@ -410,7 +416,7 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
         raise invalid(exc) from exc
     # before the graded mesh (coarse / delta) and the config's node-count guard, to name
     # the flag (a denormal --delta once overflowed there)
-    check_group_range(params)
+    check_group_range(params, opts.si)
     coarse = opts.coarse_delta  # None: the preset's graded rod; 0: uniform
     if coarse is None:
         coarse = graded_coarse(mesh["coarse_delta"], params.delta_bar)

@@ -172,6 +172,8 @@ def test_human_summary_and_demo(tmp_path: Path, capsys: pytest.CaptureFixture[st
         (["--adhesion", "cohesive", "--cohesive-range", "0.01"], ["cohesive range", "delta_bar"]),
         (["--dt", "-1"], ["--dt"]),
         (["--transient", "-5"], ["--transient"]),
+        # metres typed as if micrometres: the group out of range names the SI flag given
+        (["--H", "20"], ["--Hbar", "--H 20", "check their units"]),
     ],
 )
 def test_unphysical_input_is_rejected_before_any_work(
