@@ -197,6 +197,17 @@ def _record_constant(args: tuple) -> Any:
         env.close()
 
 
+def _mapped(pool: Any, fn: Any, jobs: list[dict[str, Any]], what: str) -> list[Any]:
+    """``pool.map(fn, jobs)`` in order, with a progress bar on a terminal (an evaluation
+    on the model runs for minutes; nothing is printed to a log or a pipe)."""
+    it = pool.imap(fn, jobs, chunksize=1)
+    if not (sys.stderr.isatty() and jobs):
+        return list(it)
+    from tqdm import tqdm
+
+    return list(tqdm(it, total=len(jobs), desc=what, unit="run", file=sys.stderr))
+
+
 def constant_search(
     env_kwargs, max_steps, targets, pool, out: Path,
     route_of: Mapping[str, routes.Route] | None = None,
@@ -219,7 +230,7 @@ def constant_search(
     env.close()
     flows = grid(CONSTANT_SPEEDS, CONSTANT_DIRECTIONS)
     jobs = [(env_kwargs, max_steps, v, p, s) for v, p in flows for s in CONSTANT_SEARCH_SEEDS]
-    traces = pool.map(_record_constant, jobs, chunksize=1)
+    traces = _mapped(pool, _record_constant, jobs, "constant flows")
     best, rows = search(traces, targets, tol, weights, score=mode, step_limits=limits,
                         route_of=route_of)  # fmt: skip
     _write_csv(out / "constant_grid.csv", rows)
@@ -691,7 +702,7 @@ def evaluate(
                         "env_kwargs": env_kwargs, "max_steps": max_steps,
                         "save_dir": str(save_episodes) if save_episodes else None,
                     })  # fmt: skip
-        results = pool.map(run_episode, job_list, chunksize=1)
+        results = _mapped(pool, run_episode, job_list, "episodes")
     results = [r for key, r in old.items() if key[0] in reused] + results
     rows = [r["row"] for r in results]
     _write_csv(out / "episodes.csv", rows)
