@@ -157,6 +157,7 @@ def test_1d_sweep_in_parallel_then_resumes(tmp_path: Path, counted: list) -> Non
     assert code == 0, stderr
     assert len(counted) == 2
     assert len({r["config_hash"] for r in sweep.read_rows(out)[1]}) == 2
+    assert "also holds rows of 1 other configuration" in stderr  # said, not silent
 
 
 def test_2d_grid_writes_a_phase_diagram(tmp_path: Path) -> None:

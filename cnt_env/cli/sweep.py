@@ -152,6 +152,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise CliError(f"cannot write the plots: {exc}", EXIT_FAILED) from exc
 
     rows = outcome["rows"]
+    _, all_rows = sweep.read_rows(plan.csv_path)
+    others = sorted({r.get("config_hash") for r in all_rows} - {plan.config_hash, None, ""})
+    if others:  # a changed base config is another sweep in the same file
+        warn(f"{plan.csv_path} also holds rows of {len(others)} other configuration(s) "
+             f"(config_hash {', '.join(others)[:120]}); {config_json} describes this one "
+             f"({plan.config_hash}): pass another --out to keep sweeps apart")  # fmt: skip
     failed = [r for r in rows if row_class(r) == "failed"]
     summary = {
         "csv": str(plan.csv_path),
