@@ -197,6 +197,13 @@ def _record_constant(args: tuple) -> Any:
         env.close()
 
 
+def _shown(path: str) -> str:
+    """``path`` relative to the working directory when under it (a results file then
+    names the repository's model, not one machine's absolute path)."""
+    p, cwd = Path(path).resolve(), Path.cwd().resolve()
+    return str(p.relative_to(cwd)) if p.is_relative_to(cwd) else str(p)
+
+
 def _mapped(pool: Any, fn: Any, jobs: list[dict[str, Any]], what: str) -> list[Any]:
     """``pool.map(fn, jobs)`` in order, with a progress bar on a terminal (an evaluation
     on the model runs for minutes; nothing is printed to a log or a pipe)."""
@@ -722,7 +729,7 @@ def evaluate(
         # model's results are otherwise alike), and each trained policy's model file
         "env_kwargs": to_jsonable(env_kwargs),
         "max_episode_steps": max_steps,
-        "models": {p: spec["model"] for p, spec in specs.items() if "model" in spec},
+        "models": {p: _shown(spec["model"]) for p, spec in specs.items() if "model" in spec},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
