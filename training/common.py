@@ -242,6 +242,17 @@ def held_out_names(env_kwargs: dict[str, Any]) -> tuple[str, ...]:
     return routes.HELD_OUT if score_mode(env_kwargs) == "corridor" else targets_mod.HELD_OUT
 
 
+class DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's defaults in the help, but not after a help that states its own default
+    or for a default of None (it printed "(default: ...) (default: None)")."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if action.default is None or "(default" in text:
+            return text
+        return super()._get_help_string(action)
+
+
 def check_dir_option(parser: argparse.ArgumentParser, dest: str, path: Path | None) -> None:
     """A usage error (exit 2) when the directory option ``dest`` names an existing file,
     before anything is made (a directory that does not exist yet is created later)."""

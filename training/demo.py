@@ -31,6 +31,7 @@ from .common import (
     CHECKPOINT_CALLBACK,
     CONFIG_DIR,
     EVAL_CALLBACK,
+    DefaultsHelp,
     check_dir_option,
     env_settings,
     held_out_names,
@@ -59,7 +60,7 @@ SHORT_RUN = "ppo_short"
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="cnt-demo", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+                                formatter_class=DefaultsHelp)  # fmt: skip
     p.add_argument("--budget-minutes", type=positive_float, default=8.0,
                    help="wall-time budget; the short training run gets a quarter")  # fmt: skip
     p.add_argument("--targets", default="u_turn,l_up", help="held-out routes, comma separated")

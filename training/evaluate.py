@@ -67,6 +67,7 @@ from .common import (
     CONFIG_DIR,
     ENV_ID,
     VALIDATION,
+    DefaultsHelp,
     HeldOutCycle,
     check_dir_option,
     csv_list,
@@ -801,7 +802,7 @@ def _normalised(row: dict[str, Any]) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-evaluate", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+                                formatter_class=DefaultsHelp)  # fmt: skip
     p.add_argument("--policies", default=",".join(ALL_POLICIES),
                    help="comma separated: random, constant, scripted, or a model name "
                         "<name> (--models/<name>.zip)")  # fmt: skip

@@ -37,7 +37,14 @@ from typing import Any
 import numpy as np
 
 from training.callbacks import policy_kwargs
-from training.common import CONFIG_DIR, ENV_ID, env_settings, load_config, parse_cli
+from training.common import (
+    CONFIG_DIR,
+    ENV_ID,
+    DefaultsHelp,
+    env_settings,
+    load_config,
+    parse_cli,
+)
 
 __all__ = ["RLlibPolicy", "build_config", "main", "train_rllib"]
 
@@ -195,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="cnt-train-rllib",
         description="Train PPO on CNTDeposit-v0 with RLlib, locally or on a Ray cluster.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelp,
     )
     ap.add_argument("--config", type=Path, default=CONFIG_DIR / "ppo.yml", help="rl-zoo YAML")
     ap.add_argument("--timesteps", type=int, default=20000, help="env steps to sample")

@@ -67,6 +67,7 @@ from .callbacks import make_curriculum, make_task_metrics
 from .common import (
     CONFIG_DIR,
     ENV_ID,
+    DefaultsHelp,
     HeldOutCycle,
     ResidualAction,
     algo_kwargs,
@@ -412,7 +413,7 @@ def _write_learning_curve(run: Path) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+                                formatter_class=DefaultsHelp)  # fmt: skip
     p.add_argument("--algo", choices=("ppo", "sac"), required=True, help="algorithm")
     p.add_argument("--config", type=Path, default=None,
                    help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip

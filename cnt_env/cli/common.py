@@ -319,7 +319,13 @@ def add_model_arguments(m: Any) -> None:
         help="graded mesh: arc length above the contact kept at --delta (default: "
         f"{MESH['serpentine']['fine_length']:g})",
     )
-    m.add_argument("--contact-mode", choices=CONTACT_MODES, default="event")
+    m.add_argument(
+        "--contact-mode",
+        choices=CONTACT_MODES,
+        default="event",
+        help="touchdown: event (the step that lands a node is cut to land it on y = 0) or "
+        "project (the node is projected onto y = 0 after the step) (default: event)",
+    )
     m.add_argument(
         "--adhesion",
         choices=ADHESION_MODELS,
