@@ -41,7 +41,9 @@ __all__ = [
 FAR = 1.0e6
 
 
-def _edge_projections(points: np.ndarray, poly: np.ndarray):
+def _edge_projections(
+    points: np.ndarray, poly: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(q, d, ab)``: each of ``points`` (n, 2) projected on each edge of ``poly`` (k, 2),
     clipped to the edge (n, k, 2), its distance (n, k), and the edges (k, 2). A
     zero-length edge (a repeated vertex) projects onto its point: t = 0, not 0 / 0."""
