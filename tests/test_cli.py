@@ -609,3 +609,21 @@ def test_no_output_replaces_an_input_and_a_directory_name_is_refused(
     code, _, stderr = _call(["run", *TINY, "--out", f"{tmp_path}/results/"])
     assert code == 2 and "ends in '/'" in stderr
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["run", "--Hbr", "40"], "did you mean --Hbar?"),
+        (["run", "--Hbar", "abc"], "argument --Hbar: invalid float value"),
+        (["sweep", "--param"], "argument --param: expected one argument"),
+        (["nosuch"], "invalid choice: 'nosuch'"),
+    ],
+)
+def test_argparse_errors_are_one_line_too(argv: list[str], says: str) -> None:
+    """docs/cli.md: every error is one line, ``cnt-sim: error: ...`` (argparse's own
+    printed the usage first), an unknown flag with the closest known one."""
+    code, stdout, stderr = _call(argv)
+    assert code == 2 and stdout == ""
+    assert stderr.startswith("cnt-sim: error: ") and stderr.count("\n") == 1
+    assert says in stderr and "--help" in stderr

@@ -16,11 +16,12 @@ The simulator and matplotlib are imported only by the commands that need them, s
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from cnt_env import units
 from cnt_env.cli import sweep as sweep_cli
@@ -120,8 +121,28 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return main(run_argv)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's usage errors as the one line of docs/cli.md, ``cnt-sim: error: ...``
+    (argparse printed the usage first), with the closest flag for an unknown one."""
+
+    def error(self, message: str) -> NoReturn:
+        if message.startswith("unrecognized arguments:"):
+            flags = {f for p in _parsers(self) for a in p._actions for f in a.option_strings}
+            unknown = [w for w in message.split(":", 1)[1].split() if w.startswith("-")]
+            close = [m for w in unknown for m in difflib.get_close_matches(w, flags, n=1)]
+            if close:
+                message += f" (did you mean {', '.join(close)}?)"
+        self.exit(EXIT_USAGE, f"{PROG}: error: {message}; see `{self.prog} --help`\n")
+
+
+def _parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """``parser`` and its subcommands' parsers."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return [parser, *(p for s in subs for p in s.choices.values())]
+
+
 def build_parser(run_defaults: Mapping[str, Any] | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog=PROG,
         description="Carbon-nanotube deposition simulator (discrete elastic rods).",
     )
