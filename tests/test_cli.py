@@ -174,6 +174,7 @@ def test_human_summary_and_demo(tmp_path: Path, capsys: pytest.CaptureFixture[st
         (["--transient", "-5"], ["--transient"]),
         # metres typed as if micrometres: the group out of range names the SI flag given
         (["--H", "20"], ["--Hbar", "--H 20", "check their units"]),
+        (["--png", "fig.jpg"], ["--png", "name it <file>.png"]),  # it held PNG bytes
     ],
 )
 def test_unphysical_input_is_rejected_before_any_work(

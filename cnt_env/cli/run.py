@@ -122,10 +122,13 @@ def format_summary(result: Mapping[str, Any], written: Sequence[Path] = ()) -> s
 
 def stage_output(outputs: OutputSet, value: str | None, flag: str) -> Path | None:
     """Check an output and its ``<file>.json`` and stage both (temporary files in their
-    folder) before any work; None when not asked for."""
+    folder) before any work; None when not asked for. A ``--png`` is a PNG by name too
+    (``fig.jpg`` held PNG bytes)."""
     if value is None:
         return None
     path = outputs.check(value, flag)
+    if flag == "--png" and path.suffix.lower() != ".png":
+        raise CliError(f"--png {value}: the figure is a PNG: name it <file>.png")
     outputs.check(f"{path}.json", flag)
     outputs.add(path, flag, checked=True)
     outputs.add(f"{path}.json", flag, checked=True)
