@@ -417,6 +417,17 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
     # before the graded mesh (coarse / delta) and the config's node-count guard, to name
     # the flag (a denormal --delta once overflowed there)
     check_group_range(params, opts.si)
+    if physical is not None and warn is not None:
+        # the preset's SI values round the paper's groups: say what the run now uses
+        ref = units.paper_groups(opts.preset)
+        pairs = [(g, getattr(params, g), getattr(ref, g)) for g in ("Hbar", "Ibar", "vbar")]
+        moved = [f"{g} {a:.4g} (preset {b:.4g})" for g, a, b in pairs
+                 if not math.isclose(a, b, rel_tol=1e-6)]  # fmt: skip
+        if moved:
+            warn(
+                "SI values given: the groups follow from them and the preset's other SI "
+                "values: " + ", ".join(moved)
+            )
     coarse = opts.coarse_delta  # None: the preset's graded rod; 0: uniform
     if coarse is None:
         coarse = graded_coarse(mesh["coarse_delta"], params.delta_bar)

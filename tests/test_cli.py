@@ -210,6 +210,20 @@ def test_si_values_win_over_groups() -> None:
     assert params.delta_bar == 0.5 and params.kt_over_kb == 1.0
 
 
+def test_si_values_that_move_the_groups_say_so() -> None:
+    """One SI value re-derives every group from the preset's SI values, which round the
+    paper's groups (H̄ 155.9, Ī 309 for the serpentine's 155, 300): a warning says what
+    the run now uses (it changed them silently)."""
+    said: list[str] = []
+    cnt_env.runs.resolve(cnt_env.runs.RunOptions(preset="serpentine", si={"v": 1.0}),
+                         warn=said.append)  # fmt: skip
+    assert len(said) == 1 and "Hbar 155.9 (preset 155)" in said[0]
+    assert "Ibar 309 (preset 300)" in said[0]
+    said.clear()
+    cnt_env.runs.resolve(cnt_env.runs.RunOptions(preset="serpentine"), warn=said.append)
+    assert said == []  # the preset's groups as they are: nothing to say
+
+
 # --------------------------------------------------------------------------- measure
 
 
