@@ -258,6 +258,7 @@ class RouteFollower:
         # the directions of the last flows given (at least the last one, for ``hooked``)
         self._phis: deque[float] = deque(maxlen=max(1, self.run_centre))
         self._played: float | None = None
+        self._episode: int | None = None
         self._run = False  # whether the centre is a run's (its contact point)
         self._prev_contact: np.ndarray | None = None  # the contact (route frame) a step ago
         self._prev_centre: np.ndarray | None = None  # the centre (route frame) a step ago
@@ -291,8 +292,10 @@ class RouteFollower:
         route = None if self._env is None else getattr(self._env, "target", None)
         if route is None or not hasattr(route, "waypoints"):
             return None
-        if route is not self._route:
+        episode = getattr(self._env, "episode_index", None)
+        if route is not self._route or episode != self._episode:  # a new route or episode
             self._route, self._half, self._planned = route, np.zeros(2), None
+            self._episode = episode
             self._windows.clear()
             self._bands.clear()
             self._prev_centre = self._prev_contact = None

@@ -458,6 +458,30 @@ def test_the_hook_test_after_the_start_flow_uses_the_flow_played() -> None:
     env.close()
 
 
+def test_the_follower_starts_each_episode_afresh_even_on_the_same_route_object() -> None:
+    """Its per-route memory (band windows, start flow, previous centre) was keyed on the
+    Route object only: an episode on the same Route without ``policy.reset()`` carried
+    the last episode's state. The env's ``episode_index`` tells the episodes apart."""
+    from cnt_env.task.routes import held_out
+    from policies import RouteFollower
+
+    env = gymnasium.make("CNTDeposit-v0", drag_law="printed", delta_bar=1.0)
+    route = held_out("u_turn")
+    pol = RouteFollower.from_env(env)
+    obs, _ = env.reset(seed=0, options={"target": route})
+    pol.reset(0)
+    index = env.unwrapped.episode_index
+    for _ in range(4):
+        obs, *_ = env.step(pol.act(obs))
+    obs, _ = env.reset(seed=5, options={"target": route})
+    assert env.unwrapped.episode_index == index + 1
+    stale = pol.act(obs)  # no pol.reset()
+    fresh = RouteFollower.from_env(env)
+    obs, _ = env.reset(seed=5, options={"target": route})
+    assert np.array_equal(stale, fresh.act(obs))
+    env.close()
+
+
 def test_route_follower_unhooks_away_from_the_steps_axis() -> None:
     """``unhook_turn``: with ``unhook_away`` (the default) the flow
     turns away from ±z toward the side it leans to, so its across-step part grows in all

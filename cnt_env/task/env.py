@@ -441,6 +441,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._target_abs.copy()
 
     @property
+    def episode_index(self) -> int:
+        """How many episodes this env has begun (successful resets): a policy that keeps
+        per-episode state tells a new episode by it, even on the same route object."""
+        return getattr(self, "_episode_index", 0)
+
+    @property
     def episode_start(self) -> int:
         """Index in ``sim.trace()`` of the first node laid in this episode."""
         return self._n0
@@ -535,6 +541,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._target_s = targets_mod.cumulative_length(self._target_abs)
         self._target_length = float(self._target_s[-1])
         self._steps = 0
+        self._episode_index = getattr(self, "_episode_index", 0) + 1
         self._renderer = None  # a new episode: a new fixed extent
         self._failure: str | None = None
 
