@@ -112,10 +112,16 @@ def check_run_config(config: dict[str, Any]) -> None:
     """Refuse a config whose run cannot start: ``n_timesteps`` and ``n_envs`` positive
     integers, and an episode cap (``env_kwargs.max_episode_steps``) of at least 1."""
     env_settings(config)  # the episode cap
-    for key, value in (("n_timesteps", config.get("n_timesteps")),
-                       ("n_envs", config.get("n_envs", 2))):  # fmt: skip
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{key} must be a positive integer, got {value!r}")
+    _positive_int_setting("n_timesteps", config.get("n_timesteps"))
+    _positive_int_setting("n_envs", config.get("n_envs", 2))
+
+
+def _positive_int_setting(key: str, value: Any) -> int:
+    """``value`` of config setting ``key`` if it is a positive integer as written (not
+    true, 2.9 or "300", which int() would take), else ValueError naming the key."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{key} must be a positive integer, got {value!r}")
+    return int(value)
 
 
 def held_out_targets(text: str, names: Sequence[str]) -> list[str]:
@@ -137,10 +143,7 @@ def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
     steps = env_kwargs.pop("max_episode_steps", None)
     if steps is None:
         steps = config.get("max_episode_steps", DEFAULT_MAX_EPISODE_STEPS)
-    # checked here, before any conversion: true, 2.9 or "300" are mistakes, not 1, 2, 300
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-        raise ValueError(f"max_episode_steps must be a positive integer, got {steps!r}")
-    return env_kwargs, int(steps)
+    return env_kwargs, _positive_int_setting("max_episode_steps", steps)
 
 
 def callback_settings(config: dict[str, Any], name: str) -> dict[str, Any] | None:

@@ -877,8 +877,8 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             parser.error(f"--targets: {exc}")
     for p in csv_list(args.policies):  # before any directory is made
-        if p not in BASELINES and not (args.models / f"{p}.zip").is_file():
-            model = args.models / f"{p}.zip"
+        model = args.models / f"{p}.zip"
+        if p not in BASELINES and not model.is_file():
             parser.error(f"--policies: {p!r} is neither a baseline ({', '.join(BASELINES)}) "
                          f"nor a model: there is no {model} (--models)")  # fmt: skip
     for flag in ("out", "save_episodes", "rrd", "video"):

@@ -152,8 +152,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise CliError(f"cannot write the plots: {exc}", EXIT_FAILED) from exc
 
     rows = outcome["rows"]
-    _, all_rows = sweep.read_rows(plan.csv_path)
-    others = sorted({r.get("config_hash") for r in all_rows} - {plan.config_hash, None, ""})
+    others = outcome["other_configs"]
     if others:  # a changed base config is another sweep in the same file
         warn(f"{plan.csv_path} also holds rows of {len(others)} other configuration(s) "
              f"(config_hash {', '.join(others)[:120]}); {config_json} describes this one "

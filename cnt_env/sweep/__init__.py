@@ -290,7 +290,8 @@ def execute(
 
     ``on_start(n_todo, n_skipped)`` is called before the first point,
     ``on_result(point, row, done, n_todo)`` after each. Returns the rows of the plan's
-    points (in grid order), ``n_points``, ``n_run``, ``n_skipped``, ``wall_time_s``.
+    points (in grid order), ``n_points``, ``n_run``, ``n_skipped``, ``wall_time_s`` and
+    ``other_configs``: the config hashes of the CSV's rows from other configurations.
     """
     opts = plan.options
     sink = CsvSink(plan.csv_path, plan.columns, warn=warn)
@@ -302,6 +303,8 @@ def execute(
             p.key(): done[p.key()] for p in plan.points if p.key() in done
         }
         n_skipped = len(plan.points) - len(todo)
+        hashes = {r.get("config_hash") for r in existing}
+        other_configs = sorted(hashes - {plan.config_hash, None, ""})
         if on_start is not None:
             on_start(len(todo), n_skipped)
         counter = {"done": 0}
@@ -331,6 +334,7 @@ def execute(
         "n_run": counter["done"],
         "n_skipped": n_skipped,
         "wall_time_s": wall,
+        "other_configs": other_configs,
     }
 
 

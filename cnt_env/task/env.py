@@ -406,6 +406,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             self.observation_space = spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8)
 
         self._sim: DepositionSim | None = None
+        self._episode_index = 0  # successful resets (episode_index)
         self._warm: dict[str, np.ndarray] | None = None
         self.warm_start_source: str | None = None
         self._window = raster.Window(self.metadata["render_fps"])
@@ -444,7 +445,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     def episode_index(self) -> int:
         """How many episodes this env has begun (successful resets): a policy that keeps
         per-episode state tells a new episode by it, even on the same route object."""
-        return getattr(self, "_episode_index", 0)
+        return self._episode_index
 
     @property
     def episode_start(self) -> int:
@@ -541,7 +542,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._target_s = targets_mod.cumulative_length(self._target_abs)
         self._target_length = float(self._target_s[-1])
         self._steps = 0
-        self._episode_index = getattr(self, "_episode_index", 0) + 1
+        self._episode_index += 1
         self._renderer = None  # a new episode: a new fixed extent
         self._failure: str | None = None
 
