@@ -219,6 +219,21 @@ def apply_substrate(params: units.DimensionlessParams, substrate: str | None):
     return params
 
 
+def kappa_c_steps_note(preset: str, substrate: str | None, kappa_c_given: bool) -> str | None:
+    """The note for ``--kappa-c`` on a flat preset without ``--substrate``: the critical
+    curvature turns the steps on (``DimensionlessParams.is_stepped``), which a user who
+    meant to tune the coil would not expect; ``--substrate stepped`` says it and silences
+    it. None when there is nothing to say."""
+    if not kappa_c_given or substrate is not None or preset not in units.PAPER_GROUPS:
+        return None
+    if units.PAPER_GROUPS[preset].get("kappa_c_bar") is not None:
+        return None
+    return (
+        f"--kappa-c on the {preset} preset (a flat substrate) turns the steps on: the run is "
+        "on the stepped substrate; add --substrate stepped to say so"
+    )
+
+
 def check_group_range(params: units.DimensionlessParams, si: Mapping[str, Any] | None = None
                       ) -> None:  # fmt: skip
     """Reject groups outside :data:`GROUP_RANGE` (the model's meaningful range); ``si``:
@@ -450,6 +465,9 @@ def resolve(opts: RunOptions, warn: Callable[[str], None] | None = _warn_stderr)
             f"deposit / delta), over the limit of {opts.limits.max_nodes}; lower --Hbar or "
             "--deposit, coarsen --delta, or raise --max-nodes"
         )
+    note = kappa_c_steps_note(opts.preset, opts.substrate, groups.get("kappa_c_bar") is not None)
+    if note is not None and warn is not None:  # once the run is known to be valid
+        warn(note)
     return RunSpec(
         preset=opts.preset,
         substrate="stepped" if params.is_stepped else "flat",

@@ -488,6 +488,31 @@ def test_run_config_file_round_trips_and_flags_win(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
+    ("text", "extra", "named"),
+    [
+        ("vbar: abc\n", [], "--vbar 'abc' is not a valid value"),  # argparse's type
+        ("preset: serp\n", [], "--preset must be one of coil, serpentine"),  # its choices
+        ("vbar: -1\n", [], "(set in --config"),  # the model's range
+        ("seed: 2.5\n", [], "(set in --config"),
+        ("vbar: 0.05\n", ["--vbar", "-1"], None),  # the bad value is the command line's
+    ],
+)
+def test_a_bad_value_in_the_config_file_names_the_file(
+    tmp_path: Path, text: str, extra: list[str], named: str | None
+) -> None:
+    """A bad value from --config names the file (where it must be fixed) and the setting;
+    one given on the command line does not blame the file."""
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    code, out, err = _call(["run", "--config", str(path), *TINY, *extra])
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    if named is None:
+        assert "--config" not in err and "--vbar" in err
+    else:
+        assert str(path) in err and named in err
+
+
+@pytest.mark.parametrize(
     "argv",
     [
         ["sweep", "--Hbar=30", "--deposit=3", "--no-plots", "--param=--", "--range=", "--out=x"],

@@ -37,6 +37,23 @@ def test_run_options_is_frozen_and_resolve_matches_resolve_run() -> None:
     assert runs.resolve(opts) == runs.resolve_run("coil", groups={"Hbar": 40.0}, deposit=5.0)
 
 
+def test_kappa_c_on_the_coil_preset_says_it_turns_the_steps_on() -> None:
+    """--kappa-c makes a flat preset stepped (is_stepped): said once, unless --substrate
+    stepped already says it or the preset is stepped."""
+    notes: list[str] = []
+    spec = runs.resolve(runs.RunOptions(groups={"kappa_c_bar": 0.1}), warn=notes.append)
+    assert spec.substrate == "stepped" and spec.params.kappa_c_bar == 0.1
+    assert len(notes) == 1 and "--kappa-c" in notes[0] and "--substrate stepped" in notes[0]
+    for quiet in (
+        runs.RunOptions(groups={"kappa_c_bar": 0.1}, substrate="stepped"),
+        runs.RunOptions(preset="serpentine", groups={"kappa_c_bar": 0.1}),
+        runs.RunOptions(),
+    ):
+        notes.clear()
+        runs.resolve(quiet, warn=notes.append)
+        assert notes == []
+
+
 @pytest.mark.parametrize(
     ("kwargs", "flag"),
     [

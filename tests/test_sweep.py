@@ -420,3 +420,17 @@ def test_a_csv_from_before_the_settled_columns_resumes(tmp_path: Path, fake_poin
     _clean(code, stdout, stderr, 2, "--out", "different sweep")
     # refused before any work: the CSV's record still describes the sweep it holds
     assert Path(f"{out}.json").read_bytes() == record
+
+
+def test_kappa_c_swept_on_the_coil_preset_says_it_turns_the_steps_on(
+    tmp_path: Path, fake_points: list
+) -> None:
+    """Sweeping kappa_c on a flat preset runs stepped points: said once, not per point."""
+    argv = ["sweep", *TINY, "--param", "kappa-c", "--values", "0.1,0.2", "--json", "--no-plots"]
+    code, _, stderr = _call([*argv, "--out", str(tmp_path / "a.csv")])
+    assert code == 0, stderr
+    assert stderr.count("turns the steps on") == 1 and "--substrate stepped" in stderr
+    assert len(fake_points) == 2
+    code, _, stderr = _call([*argv, "--substrate", "stepped", "--out", str(tmp_path / "b.csv")])
+    assert code == 0, stderr
+    assert "turns the steps on" not in stderr

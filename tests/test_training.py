@@ -348,6 +348,24 @@ def test_evaluate_reuses_episodes_and_redoes_a_changed_baseline(tmp_path: Path) 
     assert redone["random"] == -1.0 and redone["scripted"] >= 0.0
 
 
+def test_evaluate_into_a_used_out_names_the_files_it_kept(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An --out holding an earlier evaluation keeps the files this one does not write
+    (a --reuse run relies on that for learning_curves.png): they are listed, so a stale
+    figure is not taken for a new one; the files it writes again are not."""
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 2}}
+    out = tmp_path / "out"
+    evaluate(["random"], ["u_turn"], [0], config, out, jobs=1)
+    capsys.readouterr()
+    evaluate(["random"], ["l_up"], [0], config, out, jobs=1)
+    kept = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("kept in")]
+    assert len(kept) == 1 and kept[0].endswith("traces_u_turn.png"), kept
+    assert (out / "traces_l_up.png").is_file()
+
+
 def test_validation_eval_routes_are_fixed_family_draws() -> None:
     """``validation`` eval targets are routes drawn from the families with fixed seeds:
     distinct slots give distinct routes, every pass over the list repeats them, and none

@@ -30,6 +30,9 @@ writes, in ``--out``:
   policy (first seed) over the target; ``learning_curves.png`` from the run directories'
   ``evaluations.npz`` (``--runs``).
 
+An ``--out`` used before keeps the files this evaluation does not write (a ``--reuse``
+re-run keeps ``learning_curves.png`` so); they are listed at the end.
+
 ``--save-episodes DIR`` saves every episode with :class:`cnt_env.replay.EpisodeSaver`
 (``cnt_env.episode`` npz files); ``--rrd DIR`` also writes a rerun recording of each
 policy's first-seed episode per target (skipped with a message if rerun is missing);
@@ -647,6 +650,7 @@ def evaluate(
     limit_threads()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    started = time.time()
     env_kwargs, max_steps = env_settings(config)
     custom = dict(custom_routes or {})
     route_of = None
@@ -747,10 +751,26 @@ def evaluate(
             print(f"videos: {len(paths)} in {video}")
     if tmp is not None:
         tmp.cleanup()
+    kept = earlier_outputs(out, started)
+    if kept:
+        print(f"kept in {out} from an earlier evaluation (not written by this one): "
+              f"{', '.join(kept)}")  # fmt: skip
     wall = time.perf_counter() - t0
     print(_format_table(table))
     print(f"evaluated {len(job_list)} episodes in {wall:.0f} s (constant search {t_search:.0f} s)")
     return table
+
+
+#: The files an evaluation writes (module doc); in an ``--out`` used before, those this
+#: one did not write stay (a re-run with --reuse keeps learning_curves.png on purpose).
+OUTPUT_PATTERNS = ("episodes.*", "results.*", "summary.json", "traces*.png", "traces.npz",
+                   "constant_grid.csv", "constant_best.json", "learning_curves.png")  # fmt: skip
+
+
+def earlier_outputs(out: Path, since: float) -> list[str]:
+    """Evaluation outputs in ``out`` last written before ``since`` (a ``time.time()``)."""
+    files = {p for pattern in OUTPUT_PATTERNS for p in out.glob(pattern) if p.is_file()}
+    return sorted(p.name for p in files if p.stat().st_mtime < since)
 
 
 def markdown_tables(table: Sequence[dict[str, Any]]) -> str:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import os
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -141,6 +142,61 @@ def _parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
     return [parser, *(p for s in subs for p in s.choices.values())]
 
 
+def _run_actions(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    """The ``run`` subcommand's actions by dest."""
+    return {a.dest: a for a in _subparser(parser, "run")._actions if a.option_strings}
+
+
+def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return subs[0].choices[name]
+
+
+def _file_only_flags(
+    parser: argparse.ArgumentParser, settings: Mapping[str, Any], argv: Sequence[str]
+) -> dict[str, str]:
+    """The flags a ``--config`` file sets and the command line does not, with their
+    values: an error about one of them must name the file, where the user can fix it."""
+    given = {w.split("=", 1)[0] for w in argv if w.startswith("--")}
+    actions = _run_actions(parser)
+    out: dict[str, str] = {}
+    for dest, value in settings.items():
+        flags = actions[dest].option_strings if dest in actions else []
+        if flags and not given.intersection(flags):
+            out[flags[-1]] = repr(value)
+    return out
+
+
+def _check_file_values(
+    parser: argparse.ArgumentParser, settings: Mapping[str, Any], path: str
+) -> None:
+    """argparse neither checks the choices of a default nor names where a bad one came
+    from: check the file's values as the flags' own types and choices would."""
+    actions = _run_actions(parser)
+    for dest, value in settings.items():
+        action = actions.get(dest)
+        if action is None:
+            continue
+        flag = action.option_strings[-1]
+        try:
+            typed = action.type(value) if callable(action.type) else value
+        except (TypeError, ValueError, argparse.ArgumentTypeError):
+            raise CliError(f"--config {path}: {flag} {value!r} is not a valid value") from None
+        if action.choices is not None and typed not in action.choices:
+            raise CliError(f"--config {path}: {flag} must be one of "
+                           f"{', '.join(map(str, action.choices))}, got {value!r}")  # fmt: skip
+
+
+def _name_the_file(message: str, from_file: Mapping[str, str], args: Any) -> str:
+    """``message`` with the ``--config`` file named when it is about a flag only the file
+    set."""
+    named = [f for f in from_file if re.search(rf"{re.escape(f)}(?![\w-])", message)]
+    if not named:
+        return message
+    values = ", ".join(f"{f} {from_file[f]}" for f in named)
+    return f"{message.rstrip('.')} (set in --config {args.config}: {values})"
+
+
 def build_parser(run_defaults: Mapping[str, Any] | None = None) -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog=PROG,
@@ -230,9 +286,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, usage errors
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    from_file: dict[str, str] = {}  # flag -> the --config value it got (not overridden)
     if getattr(args, "config", None):  # cnt-sim run --config: the file's values, then flags
         try:
-            parser = build_parser(load_run_config(args.config))
+            settings = load_run_config(args.config)
+            from_file = _file_only_flags(parser, settings, argv)
+            _check_file_values(parser, settings, args.config)
+            parser = build_parser(settings)
             args = parser.parse_args(argv)
         except CliError as exc:
             return _error(str(exc), exc.code)
@@ -250,7 +310,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CliError as exc:
         return _error(str(exc), exc.code)
     except (RunInputError, OutputError, TraceFileError, units.ParameterError) as exc:
-        return _error(str(exc), EXIT_USAGE)
+        return _error(_name_the_file(str(exc), from_file, args), EXIT_USAGE)
     except RunLimitError as exc:
         return _error(str(exc), EXIT_LIMIT)
     except (SimulationError, SweepFailure) as exc:

@@ -330,6 +330,10 @@ def resolve_sweep(opts: SweepOptions, warn: Any = None) -> SweepPlan:
                 raise InputError(f"point {len(specs) + 1} of {total} ({where}): {exc}") from exc
             specs.append((values, spec))
 
+    kappa_given = "kappa_c_bar" in swept or opts.run.groups.get("kappa_c_bar") is not None
+    note = runs.kappa_c_steps_note(base.preset, base.substrate, kappa_given)
+    if note is not None and warn is not None:  # once, after every point resolved
+        warn(note)
     digest = sweep_hash(specs[0][1], swept, base)
     plots_dir = None if opts.no_plots else Path(opts.plots or csv_path.parent or ".")
     traces_dir = Path(opts.traces) if opts.traces else None
