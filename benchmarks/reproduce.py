@@ -1016,9 +1016,16 @@ def main(argv: list[str] | None = None) -> int:
                       for spec in args.point]  # fmt: skip
         except ValueError:
             ap.error(f"--point takes K=V[,K=V], got {args.point}")
+        full = table
         table = {k: [p for p in v if p["groups"] in wanted] for k, v in table.items()}
         if not any(table.values()):
-            ap.error(f"no point of the table has the groups {args.point}")
+            keys = {k for w in wanted for k in w}
+            points = [p["groups"] for v in full.values() for p in v]
+            near = sorted({",".join(f"{k}={v:g}" for k, v in g.items())
+                           for g in points if keys & set(g)})  # fmt: skip
+            ap.error(f"no point of the table has the groups {args.point}; the table's points "
+                     f"with {sorted(keys)}: {' '.join(near) or 'none'}. A point off the table "
+                     "is a `cnt-sim run` (e.g. --preset serpentine --vbar 0.02)")  # fmt: skip
     seeds: list[int] = args.seeds
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)

@@ -199,3 +199,14 @@ def test_si_section_converts_with_each_substrates_length() -> None:
     assert f"| serpentine amplitude A, vbar row {amplitude}" in text
     assert "| serpentine wavelength lambda_x, vbar row | 0.5-3 | 0.40-1.00 | 2 | 1 of 2 |" in text
     assert "| coil radius R0, coil rows (experiments) | 0.5-5 | 0.60-0.60 | 1 | 1 of 1 |" in text
+
+
+def test_a_point_off_the_table_lists_the_table_points_it_could_mean(tmp_path: Path, capsys) -> None:
+    """--point takes only the table's points: an off-table value is refused before any
+    run, listing the table's points with that group and naming `cnt-sim run`."""
+    with pytest.raises(SystemExit) as stop:
+        reproduce.main(["--point", "vbar=0.02", "--out", str(tmp_path)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "vbar=0.019" in err and "vbar=0.037" in err and "cnt-sim run" in err
+    assert not (tmp_path / "results.jsonl").exists()
