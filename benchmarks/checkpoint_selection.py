@@ -8,8 +8,12 @@ route), and, with ``--heldout`` (a ``cnt-evaluate`` results directory that evalu
 same models), sets each model's validation mean beside its held-out mean: the model a
 larger validation set would pick from each run, and how well the two agree.
 
-    python benchmarks/checkpoint_selection.py --models DIR --names ppo_a40,ppo_abest,... \
-        --routes 12 --jobs 2 [--heldout RESULTS_DIR] [--out FILE.json]
+    python benchmarks/checkpoint_selection.py --models DIR [DIR ...] \
+        --names ppo_a40,ppo_abest,... --routes 12 --jobs 2 [--heldout RESULTS_DIR] \
+        [--out FILE.json]
+
+A name ``a+b`` is the ensemble of models a and b (``cnt-evaluate``'s, the mean of their
+actions).
 
 The run's prefix groups the names (``ppo_a40`` and ``ppo_abest`` are run ``ppo_a``):
 the selection is made within a run, as one run's budget allows.
@@ -32,7 +36,7 @@ from cnt_env.cli.common import name_list
 def _episode(job: tuple[str, str, int, str]) -> tuple[str, int, float]:
     """Score of model ``name`` (or the follower, ``scripted``) on validation route i."""
     from training.common import VALIDATION_SEED0, env_settings, limit_threads, load_config, make_env
-    from training.evaluate import _make_policy, _play
+    from training.evaluate import _make_policy, _play, ensemble_members, model_file
 
     limit_threads()
     models, name, i, config = job
@@ -41,7 +45,7 @@ def _episode(job: tuple[str, str, int, str]) -> tuple[str, int, float]:
     spec = (
         {"kind": "scripted"}
         if name == "scripted"
-        else {"kind": "model", "model": f"{models}/{name}.zip"}
+        else {"kind": name, "models": [str(model_file(m, models)) for m in ensemble_members(name)]}
     )
     policy = _make_policy(spec, env)
     obs, _ = env.reset(seed=VALIDATION_SEED0 + i)
@@ -61,7 +65,8 @@ def main(argv: list[str] | None = None) -> None:
     from training.common import CONFIG_DIR, VALIDATION_SEED0
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--models", required=True)
+    p.add_argument("--models", nargs="+", required=True,
+                   help="model directories, the first holding a name wins")  # fmt: skip
     p.add_argument("--names", type=name_list, required=True, help="comma separated model names")
     p.add_argument("--routes", type=int, default=12)
     p.add_argument("--jobs", type=int, default=2)

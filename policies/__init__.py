@@ -2,13 +2,16 @@
 for the route task, the tangent heuristic for the thin one), SB3 loaders.
 
 Every policy has ``act(obs) -> action`` (float32 (2,) in [-1, 1]) and ``reset(seed)``
-(:class:`~policies.base.Policy`). ``pretrained/`` holds one trained model per algorithm
-(``<algo>.zip`` + ``<algo>_vecnormalize.pkl``) and its ``env.yml``.
+(:class:`~policies.base.Policy`). ``pretrained/`` holds the shipped agents: each
+``<name>.zip``, its VecNormalize statistics (``<name>_vecnormalize.npz`` + ``.json``), the
+resolved training config ``<name>.yml``, and ``MANIFEST.json`` (their sha256). ``MeanPolicy`` plays
+the mean of several trained agents' actions (an ensemble; ``cnt-evaluate --policies a+b``).
 """
 
 from pathlib import Path
 
 from .base import ConstantPolicy, Policy, RandomPolicy, action_from_flow
+from .ensemble import MeanPolicy
 from .route_follower import RouteFollower
 from .sb3 import SB3Policy, load_policy
 from .scripted import ScriptedPolicy
@@ -18,6 +21,7 @@ PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 __all__ = [
     "PRETRAINED_DIR",
     "ConstantPolicy",
+    "MeanPolicy",
     "Policy",
     "RandomPolicy",
     "RouteFollower",

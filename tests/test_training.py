@@ -104,6 +104,29 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
+def test_evaluate_plays_an_ensemble_named_a_plus_b(tmp_path: Path) -> None:
+    """``a+b`` is the mean of models a and b: an agent with itself lays the agent's own
+    traces bit for bit; with another agent, other traces; a member that is no model is
+    refused before any episode."""
+    from training.common import load_config
+    from training.evaluate import evaluate
+
+    config = load_config(PRETRAINED_DIR / "ppo_residual.yml")
+    config["env_kwargs"]["max_episode_steps"] = 4
+    names = ["ppo_residual", "ppo_residual+ppo_residual", "ppo_residual+ppo"]
+    evaluate(names, ["u_turn"], [0], config, tmp_path, jobs=1)
+    rows = json.loads((tmp_path / "episodes.json").read_text())
+    traces = np.load(tmp_path / "traces.npz")
+    by = {r["policy"]: traces[f"trace_{i}"] for i, r in enumerate(rows)}
+    np.testing.assert_array_equal(by["ppo_residual"], by["ppo_residual+ppo_residual"])
+    assert not np.array_equal(by["ppo_residual"], by["ppo_residual+ppo"])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["models"]["ppo_residual+ppo"].count(".zip") == 2
+    with pytest.raises(FileNotFoundError, match="no nothing model"):
+        evaluate(["ppo+nothing"], ["u_turn"], [0], config, tmp_path / "x", jobs=1)
+
+
+@pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
 def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> None:
     """``model_paths`` (cnt-demo's short run): a policy name whose model is not
     ``<models>/<name>.zip`` plays that model, episode for episode as under its own name."""

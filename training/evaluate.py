@@ -2,7 +2,7 @@
 
     cnt-evaluate [--policies random,constant,scripted,ppo,sac] [--targets all]
                  [--route-file FILE]
-                 [--seeds 0,1,2] [--models policies/pretrained] [--runs DIR ...]
+                 [--seeds 0,1,2] [--models policies/pretrained ...] [--runs DIR ...]
                  [--config training/configs/eval.yml] [--constant-from FILE]
                  [--out training/results] [--jobs 2] [--save-episodes DIR] [--rrd DIR]
                  [--video DIR [--video-format mp4|gif]] [--trust]
@@ -38,6 +38,10 @@ re-run keeps ``learning_curves.png`` so); they are listed at the end.
 policy's first-seed episode per target (skipped with a message if rerun is missing);
 ``--video DIR`` writes an MP4 (``--video-format gif``: a GIF) of every episode
 (:func:`cnt_env.replay.write_video`; needs the video extra).
+
+A policy ``a+b`` is the ensemble of models ``a`` and ``b``: it plays the mean of their
+actions (:class:`policies.ensemble.MeanPolicy`); ``--models`` may list several
+directories, the first holding a name wins.
 
 Models are loaded without running code from their files (:func:`policies.load_policy`,
 docs/security.md); ``--trust`` lifts that for files you trust.
@@ -125,7 +129,27 @@ def _make_policy(spec: dict[str, Any], env):
         if env.unwrapped.score_mode == "corridor":
             return RouteFollower.from_env(env)
         return ScriptedPolicy.from_env(env)
-    return load_policy(spec["model"], trust=bool(spec.get("trust")), env=env)
+    paths = spec.get("models") or [spec["model"]]  # "model": one agent (the benchmarks')
+    agents = [load_policy(m, trust=bool(spec.get("trust")), env=env) for m in paths]
+    if len(agents) == 1:
+        return agents[0]
+    from policies.ensemble import MeanPolicy
+
+    return MeanPolicy(agents, name=kind)
+
+
+def model_file(name: str, models: Path | Sequence[Path]) -> Path:
+    """``<dir>/<name>.zip`` in the first of the ``models`` directories that holds it (the
+    first directory's path when none does, for the error)."""
+    dirs = [Path(models)] if isinstance(models, (str, Path)) else [Path(d) for d in models]
+    paths = [d / f"{name}.zip" for d in dirs]
+    return next((q for q in paths if q.is_file()), paths[0])
+
+
+def ensemble_members(policy: str) -> list[str]:
+    """The model names of a policy: ``a+b`` is the ensemble of models ``a`` and ``b``
+    (:class:`policies.ensemble.MeanPolicy`), any other name one model."""
+    return policy.split("+")
 
 
 def _play(env, policy, obs) -> tuple[int, float, dict[str, Any]]:
@@ -629,7 +653,7 @@ def evaluate(
     seeds: Sequence[int],
     config: dict[str, Any],
     out: Path,
-    models: Path = PRETRAINED,
+    models: Path | Sequence[Path] = PRETRAINED,
     runs: Sequence[Path] = (),
     constant_from: Path | None = None,
     jobs: int = 2,
@@ -691,20 +715,23 @@ def evaluate(
             if p in reused:
                 continue
             trained = p not in BASELINES
+            members: list[Path] = []
             if trained:
                 from policies.sb3 import check_model
 
-                model = Path((model_paths or {}).get(p) or Path(models) / f"{p}.zip")
-                if not model.is_file():
-                    raise FileNotFoundError(f"no {p} model at {model} (--models); train one "
-                                            "with cnt-train")  # fmt: skip
-                check_model(model, trust=trust)  # refuses before any worker starts
+                for name in ensemble_members(p):
+                    model = Path((model_paths or {}).get(name) or model_file(name, models))
+                    if not model.is_file():
+                        raise FileNotFoundError(f"no {name} model at {model} (--models); "
+                                                "train one with cnt-train")  # fmt: skip
+                    check_model(model, trust=trust)  # refuses before any worker starts
+                    members.append(model)
             for t in targets:
                 spec = {"kind": p}
                 if p == "constant":
                     spec.update(vbar=best[t]["vbar"], phi=best[t]["phi"])
                 if trained:
-                    spec["model"] = str(model)
+                    spec["models"] = [str(m) for m in members]
                     spec["trust"] = bool(trust)
                 specs[p] = spec
                 for s in seeds:
@@ -734,7 +761,8 @@ def evaluate(
         # model's results are otherwise alike), and each trained policy's model file
         "env_kwargs": to_jsonable(env_kwargs),
         "max_episode_steps": max_steps,
-        "models": {p: _shown(spec["model"]) for p, spec in specs.items() if "model" in spec},
+        "models": {p: "+".join(map(_shown, spec["models"]))
+                   for p, spec in specs.items() if "models" in spec},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
@@ -837,9 +865,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma separated episode seeds")  # fmt: skip
     p.add_argument("--config", type=Path, default=CONFIG_DIR / "eval.yml",
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
-    p.add_argument("--models", type=Path, default=PRETRAINED,
-                   help="directory of the models <policy>.zip, their <policy>_vecnormalize"
-                        ".npz + .json and MANIFEST.json")  # fmt: skip
+    p.add_argument("--models", type=Path, nargs="+", default=[PRETRAINED],
+                   help="directories of the models <policy>.zip, their <policy>_vecnormalize"
+                        ".npz + .json and MANIFEST.json; the first holding a name wins "
+                        "(--policies a+b: the ensemble of models a and b)")  # fmt: skip
     p.add_argument("--trust", action="store_true",
                    help="also load what cannot be loaded without running code from the "
                         "file (a *_vecnormalize.pkl, a zip whose pickled entries cannot be "
@@ -897,10 +926,14 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             parser.error(f"--targets: {exc}")
     for p in csv_list(args.policies):  # before any directory is made
-        model = args.models / f"{p}.zip"
-        if p not in BASELINES and not model.is_file():
-            parser.error(f"--policies: {p!r} is neither a baseline ({', '.join(BASELINES)}) "
-                         f"nor a model: there is no {model} (--models)")  # fmt: skip
+        if p in BASELINES:
+            continue
+        for name in ensemble_members(p):
+            model = model_file(name, args.models)
+            if name in BASELINES or not model.is_file():
+                parser.error(f"--policies: {name!r} is neither a baseline "
+                             f"({', '.join(BASELINES)}) nor a model: there is no {model} "
+                             "(--models; a+b: the ensemble of models a and b)")  # fmt: skip
     for flag in ("out", "save_episodes", "rrd", "video"):
         check_dir_option(parser, flag, getattr(args, flag))
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))
