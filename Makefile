@@ -28,8 +28,9 @@ $(STAMP): pyproject.toml scripts/bootstrap.sh
 venv: $(STAMP)
 
 # The main job (<= 10 min on 2 cores): simulate a serpentine (figure, trace, rerun
-# recording), then train PPO briefly, evaluate every policy against the baselines on
-# held-out targets, and write the table, plots and rerun recordings (training/demo.py).
+# recording), then train a residual PPO briefly, evaluate every policy against the
+# baselines on held-out targets, and write the table, plots and rerun recordings
+# (training/demo.py).
 DEMO_OUT := runs/demo
 demo: $(STAMP)
 	$(VENV)/bin/cnt-sim run --preset serpentine --deposit 400 --dt 31 \
