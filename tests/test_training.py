@@ -389,6 +389,23 @@ def test_evaluate_into_a_used_out_names_the_files_it_kept(
     assert (out / "traces_l_up.png").is_file()
 
 
+def test_evaluate_names_recordings_and_videos_after_their_episodes(tmp_path: Path) -> None:
+    """--save-episodes, --rrd and --video name one episode alike (its recording id,
+    ``<policy>-<target>-s<seed>-e0000``), so each recording or video finds its episode."""
+    pytest.importorskip("rerun")
+    pytest.importorskip("imageio_ffmpeg")
+    from training.evaluate import evaluate
+
+    config = {"env_kwargs": {**SMALL, "max_episode_steps": 2}}
+    evaluate(["random"], ["u_turn"], [0, 1], config, tmp_path / "out", jobs=1,
+             save_episodes=tmp_path / "ep", rrd=tmp_path / "rrd", video=tmp_path / "vid",
+             video_format="gif")  # fmt: skip
+    episodes = sorted(p.stem for p in (tmp_path / "ep").glob("*.npz"))
+    assert episodes == ["random-u_turn-s0-e0000", "random-u_turn-s1-e0000"]
+    assert sorted(p.stem for p in (tmp_path / "vid").glob("*.gif")) == episodes
+    assert [p.stem for p in (tmp_path / "rrd").glob("*.rrd")] == episodes[:1]  # first seed
+
+
 def test_validation_eval_routes_are_fixed_family_draws() -> None:
     """``validation`` eval targets are routes drawn from the families with fixed seeds:
     distinct slots give distinct routes, every pass over the list repeats them, and none

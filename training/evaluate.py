@@ -34,7 +34,8 @@ An ``--out`` used before keeps the files this evaluation does not write (a ``--r
 re-run keeps ``learning_curves.png`` so); they are listed at the end.
 
 ``--save-episodes DIR`` saves every episode with :class:`cnt_env.replay.EpisodeSaver`
-(``cnt_env.episode`` npz files); ``--rrd DIR`` also writes a rerun recording of each
+(``cnt_env.episode`` npz files, ``<policy>-<target>-s<seed>-e0000.npz``; the recordings
+and videos below take the same name); ``--rrd DIR`` also writes a rerun recording of each
 policy's first-seed episode per target (skipped with a message if rerun is missing);
 ``--video DIR`` writes an MP4 (``--video-format gif``: a GIF) of every episode
 (:func:`cnt_env.replay.write_video`; needs the video extra).
@@ -620,7 +621,7 @@ def _rrd(results: Sequence[dict[str, Any]], rrd_dir: Path) -> list[Path]:
         if key in done or not r["episode_file"]:
             continue
         done.add(key)
-        path = rrd_dir / f"{key[0]}_{key[1]}.rrd"
+        path = rrd_dir / f"{Path(r['episode_file']).stem}.rrd"  # the episode's name
         replay.record_episode(r["episode_file"], path)
         paths.append(path)
     return paths
@@ -636,8 +637,7 @@ def _videos(results: Sequence[dict[str, Any]], video_dir: Path, fmt: str) -> lis
     for r in results:
         if not r.get("episode_file"):
             continue
-        row = r["row"]
-        path = video_dir / f"{row['policy']}_{row['target']}_s{row['seed']}.{fmt}"
+        path = video_dir / f"{Path(r['episode_file']).stem}.{fmt}"  # the episode's name
         try:
             replay.write_video(r["episode_file"], path)
         except ImportError as exc:
