@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml scripts/bootstrap.sh
 
 venv: $(STAMP)
 
-# The main job (<= 10 min on 2 cores): simulate a serpentine (figure, trace, rerun
+# The main job (~12 min on 2 cores, measured 2026-11-29; the venv first takes ~2 min): simulate a serpentine (figure, trace, rerun
 # recording), then train a residual PPO briefly, evaluate every policy against the
 # baselines on held-out targets, and write the table, plots and rerun recordings
 # (training/demo.py).
