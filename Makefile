@@ -27,10 +27,10 @@ $(STAMP): pyproject.toml scripts/bootstrap.sh
 
 venv: $(STAMP)
 
-# The main job (~12 min on 2 cores, measured 2026-11-29; the venv first takes ~2 min): simulate a serpentine (figure, trace, rerun
-# recording), then train a residual PPO briefly, evaluate every policy against the
-# baselines on held-out targets, and write the table, plots and rerun recordings
-# (training/demo.py).
+# The main job (~12 min on 2 cores, measured 2026-11-29; creating the venv first takes
+# ~2 min): simulate a serpentine (figure, trace, rerun recording), then train a residual
+# PPO briefly, evaluate every policy against the baselines on held-out targets, and write
+# the table, plots and rerun recordings (training/demo.py).
 DEMO_OUT := runs/demo
 demo: $(STAMP)
 	$(VENV)/bin/cnt-sim run --preset serpentine --deposit 400 --dt 31 \
