@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     env_kwargs, max_steps = env_settings(load_config(args.config))
     policies = {"scripted": {"kind": "scripted"},
-                "ppo_residual": {"kind": "ppo_residual", "model": str(args.model)}}  # fmt: skip
+                "ppo_residual": {"kind": "ppo_residual", "models": [str(args.model)]}}  # fmt: skip
     seeds = args.seeds
     jobs = [{"policy": p, "spec": spec, "target": r, "seed": s, "env_kwargs": env_kwargs,
              "max_steps": max_steps, "save_dir": None}

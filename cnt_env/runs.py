@@ -224,9 +224,7 @@ def kappa_c_steps_note(preset: str, substrate: str | None, kappa_c_given: bool) 
     curvature turns the steps on (``DimensionlessParams.is_stepped``), which a user who
     meant to tune the coil would not expect; ``--substrate stepped`` says it and silences
     it. None when there is nothing to say."""
-    if not kappa_c_given or substrate is not None or preset not in units.PAPER_GROUPS:
-        return None
-    if units.PAPER_GROUPS[preset].get("kappa_c_bar") is not None:
+    if not kappa_c_given or substrate is not None or units.paper_groups(preset).is_stepped:
         return None
     return (
         f"--kappa-c on the {preset} preset (a flat substrate) turns the steps on: the run is "

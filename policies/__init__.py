@@ -4,8 +4,9 @@ for the route task, the tangent heuristic for the thin one), SB3 loaders.
 Every policy has ``act(obs) -> action`` (float32 (2,) in [-1, 1]) and ``reset(seed)``
 (:class:`~policies.base.Policy`). ``pretrained/`` holds the shipped agents: each
 ``<name>.zip``, its VecNormalize statistics (``<name>_vecnormalize.npz`` + ``.json``), the
-resolved training config ``<name>.yml``, and ``MANIFEST.json`` (their sha256). ``MeanPolicy`` plays
-the mean of several trained agents' actions (an ensemble; ``cnt-evaluate --policies a+b``).
+resolved training config ``<name>.yml``, and ``MANIFEST.json`` (their sha256).
+``MeanPolicy`` plays the mean of several trained agents' actions (an ensemble;
+``cnt-evaluate --policies a+b``).
 """
 
 from pathlib import Path

@@ -130,8 +130,7 @@ def _make_policy(spec: dict[str, Any], env):
         if env.unwrapped.score_mode == "corridor":
             return RouteFollower.from_env(env)
         return ScriptedPolicy.from_env(env)
-    paths = spec.get("models") or [spec["model"]]  # "model": one agent (the benchmarks')
-    agents = [load_policy(m, trust=bool(spec.get("trust")), env=env) for m in paths]
+    agents = [load_policy(m, trust=bool(spec.get("trust")), env=env) for m in spec["models"]]
     if len(agents) == 1:
         return agents[0]
     from policies.ensemble import MeanPolicy

@@ -136,29 +136,28 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{PROG}: error: {message}; see `{self.prog} --help`\n")
 
 
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """The subcommands' parsers by name."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return {name: p for s in subs for name, p in s.choices.items()}
+
+
 def _parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
     """``parser`` and its subcommands' parsers."""
-    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return [parser, *(p for s in subs for p in s.choices.values())]
+    return [parser, *_subcommands(parser).values()]
 
 
 def _run_actions(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
-    """The ``run`` subcommand's actions by dest."""
-    return {a.dest: a for a in _subparser(parser, "run")._actions if a.option_strings}
-
-
-def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
-    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return subs[0].choices[name]
+    """The ``run`` subcommand's flags' actions by dest."""
+    return {a.dest: a for a in _subcommands(parser)["run"]._actions if a.option_strings}
 
 
 def _file_only_flags(
-    parser: argparse.ArgumentParser, settings: Mapping[str, Any], argv: Sequence[str]
+    actions: Mapping[str, argparse.Action], settings: Mapping[str, Any], argv: Sequence[str]
 ) -> dict[str, str]:
     """The flags a ``--config`` file sets and the command line does not, with their
     values: an error about one of them must name the file, where the user can fix it."""
     given = {w.split("=", 1)[0] for w in argv if w.startswith("--")}
-    actions = _run_actions(parser)
     out: dict[str, str] = {}
     for dest, value in settings.items():
         flags = actions[dest].option_strings if dest in actions else []
@@ -168,11 +167,10 @@ def _file_only_flags(
 
 
 def _check_file_values(
-    parser: argparse.ArgumentParser, settings: Mapping[str, Any], path: str
+    actions: Mapping[str, argparse.Action], settings: Mapping[str, Any], path: str
 ) -> None:
     """argparse neither checks the choices of a default nor names where a bad one came
     from: check the file's values as the flags' own types and choices would."""
-    actions = _run_actions(parser)
     for dest, value in settings.items():
         action = actions.get(dest)
         if action is None:
@@ -290,8 +288,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "config", None):  # cnt-sim run --config: the file's values, then flags
         try:
             settings = load_run_config(args.config)
-            from_file = _file_only_flags(parser, settings, argv)
-            _check_file_values(parser, settings, args.config)
+            actions = _run_actions(parser)
+            from_file = _file_only_flags(actions, settings, argv)
+            _check_file_values(actions, settings, args.config)
             parser = build_parser(settings)
             args = parser.parse_args(argv)
         except CliError as exc:
