@@ -531,15 +531,19 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self._t0 = float(sim.time)
         self.target = target
         self._target_abs = target.points + self._origin
+        # The score works in the target's own frame (the trace minus the origin), as the
+        # offline scores of policies/constant.py do: shifting the target by the origin
+        # instead rounds its arc lengths and distances differently, and the two scores of
+        # one trace then part in the last bits, by an amount that depends on the origin.
         if isinstance(target, Route):
             _, pads, keepouts = target.translated(self._origin)
             self._pads_abs, self._keepouts_abs = pads, keepouts
-            self._score = RouteScore(self._target_abs, target.width, pads, keepouts)
+            self._score = RouteScore(target.waypoints, target.width, target.pads, target.keepouts)
             self.max_episode_steps = self.episode_steps_for(target)
         else:
             self._pads_abs, self._keepouts_abs = np.zeros((0, 2, 2)), ()
-            self._score = ThinScore(self._target_abs, self.tolerance, self.weights)
-        self._target_s = targets_mod.cumulative_length(self._target_abs)
+            self._score = ThinScore(target.points, self.tolerance, self.weights)
+        self._target_s = targets_mod.cumulative_length(target.points)  # the score's frame
         self._target_length = float(self._target_s[-1])
         self._steps = 0
         self._episode_index += 1
@@ -621,7 +625,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         that left the solve are frozen."""
         sim = self._sim
         n_frozen = sim.n_trace - sim.n_deposited - self._n0
-        return self._score.update(trace[self._n0 :][:, [0, 2]], n_frozen)
+        return self._score.update(trace[self._n0 :][:, [0, 2]] - self._origin, n_frozen)
 
     def _info(self, metrics: dict[str, Any], terms: dict[str, float], physics_steps: int,
               newton_iterations: int) -> dict[str, Any]:  # fmt: skip
