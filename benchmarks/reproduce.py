@@ -270,7 +270,42 @@ def rows(quick: bool = False, serpentine_run: float = SERPENTINE_RUN
     out["coil_groups"] = [
         _pt("coil_groups", COIL, long, Hbar=h) for h in (150.0, 400.0, 100.0, 200.0, 300.0)
     ] + [_pt("coil_groups", COIL, long, Ibar=i) for i in (700.0, 7000.0, 300.0, 1500.0, 4000.0)]
+    # coils against L_vb (issue 12: "coils against L_vb, H and I"): the substrate's
+    # adhesion e_v changed at the paper's tube, height and gas (lvb_groups)
+    out["coil_Lvb"] = [_pt("coil_Lvb", COIL, long, **lvb_groups(r)) for r in LVB_RATIOS]
     return out
+
+
+#: L_vb / L_vb of the paper's flat graphite on the coil_Lvb row: e_v = 4.39e-10 J/m / r^2,
+#: 1.78x down to 0.25x the graphite's adhesion (the stepped quartz's 1.64e-10 is r = 1.64)
+LVB_RATIOS = (0.75, 1.25, 1.5, 2.0)
+
+
+def lvb_groups(ratio: float) -> dict[str, float]:
+    """The coil preset's groups with the vdW-bending length L_vb = sqrt(k_b / e_v) times
+    ``ratio``, by a change of the adhesion e_v alone (k_b, H, rho, mu, k_s, r0 the
+    paper's): e_v -> e_v / ratio^2, so H/L_vb and r0/L_vb scale as 1/ratio, Ibar =
+    rho e_v^2 / (k_b mu^2) as 1/ratio^4 and k_s/e_v as ratio^2 (docs/model.md §2). In
+    SI, a coil of radius R0_bar is R0_bar * ratio * L_vb(graphite) micrometres."""
+    from cnt_env import units
+
+    g = units.paper_groups(COIL)
+    return {
+        "Hbar": g.Hbar / ratio,
+        "Ibar": g.Ibar / ratio**4,
+        "ks_over_ev": g.ks_over_ev * ratio**2,
+        "r0_bar": g.r0_bar / ratio,
+    }
+
+
+def lvb_ratio(rec: dict[str, Any]) -> float:
+    """L_vb of a record over the coil preset's: the coil_Lvb row changes it (H fixed, so
+    it is Hbar_preset / Hbar), every other row keeps its substrate's."""
+    from cnt_env import units
+
+    if rec.get("row") != "coil_Lvb":
+        return 1.0
+    return units.paper_groups(COIL).Hbar / rec["Hbar"]
 
 
 #: the study's screening rows (issue 12: v row, phi row, kappa_c row), most telling first
@@ -618,16 +653,17 @@ def headline(every: list[dict[str, Any]]) -> list[dict[str, Any]]:
 PAPER_SI: list[tuple[tuple[str, ...], str, float, float, str]] = [
     (("vbar",), "amplitude", 3.0, 13.0, "serpentine amplitude A, vbar row"),
     (("vbar",), "wavelength_x", 0.5, 3.0, "serpentine wavelength lambda_x, vbar row"),
-    (("coil", "coil_groups"), "coil_radius", 0.5, 5.0, "coil radius R0, coil rows (experiments)"),
-]
+    (("coil", "coil_groups", "coil_Lvb"), "coil_radius", 0.5, 5.0,
+     "coil radius R0, coil rows (experiments)"),
+]  # fmt: skip
 
 
 def si_section(recs: list[dict[str, Any]]) -> list[str]:
     """The model's ranges in micrometres, with L_vb of the paper's tube on each substrate
-    (units.preset; the H and I rows change H and rho, not L_vb), against PAPER_SI. The
-    amplitude is half the peak-to-peak distance (docs/model.md §7), as in the paper's range
-    (its A ~ 100 and ~ 25 are 12.8 and 3.2 um, the range's ends); peak to peak is given
-    too."""
+    (units.preset; the H and I rows change H and rho, not L_vb; the coil_Lvb row has its
+    own, lvb_ratio), against PAPER_SI. The amplitude is half the peak-to-peak distance
+    (docs/model.md §7), as in the paper's range (its A ~ 100 and ~ 25 are 12.8 and 3.2
+    um, the range's ends); peak to peak is given too."""
     from cnt_env import units
 
     l_um = {p: units.preset(p).L_vb * 1e6 for p in units.PRESETS}
@@ -640,12 +676,35 @@ def si_section(recs: list[dict[str, Any]]) -> list[str]:
         if not hits:
             lines.append(f"| {what} | {low:g}-{high:g} | not run | 0 | |")
             continue
-        um = [r[qty] * l_um[r["preset"]] for r in hits]
+        um = [r[qty] * l_um[r["preset"]] * lvb_ratio(r) for r in hits]
         inside = sum(low <= v <= high for v in um)
         got = f"{min(um):.2f}-{max(um):.2f}"
         if qty == "amplitude":
             got += f" (peak to peak {2 * min(um):.2f}-{2 * max(um):.2f})"
         lines.append(f"| {what} | {low:g}-{high:g} | {got} | {len(um)} | {inside} of {len(um)} |")
+    return lines
+
+
+def lvb_section(recs: list[dict[str, Any]]) -> list[str]:
+    """The coils against L_vb (the coil_Lvb row and the baseline coil) in micrometres, with
+    R0 / (7.64 L_vb): 1 where the coil scales with L_vb as the paper's baseline R0_bar."""
+    from cnt_env import units
+
+    l0 = units.preset(COIL).L_vb * 1e6
+    pts = sorted((r for r in recs if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
+    if len(pts) < 2:
+        return []
+    lines = ["", "## Coils against L_vb (the adhesion e_v changed; tube, H and gas the "
+             "paper's)", "", "| e_v (J/m) | L_vb (um) | Hbar | Ibar | R0_bar | R0 (um) | "
+             "R0 / (7.64 L_vb) |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in pts:
+        ratio = lvb_ratio(r)
+        lvb = l0 * ratio
+        r0 = r.get("coil_radius")
+        got = (f"{r0:.2f} | {r0 * lvb:.3f} | {r0 / 7.64:.3f}" if r0 else
+               f"no coil ({r['pattern']}) | - | -")  # fmt: skip
+        lines.append(f"| {units.PAPER_E_V_FLAT / ratio**2:.3g} | {lvb:.4f} | {r['Hbar']:.1f} | "
+                     f"{r['Ibar']:.4g} | {got} |")  # fmt: skip
     return lines
 
 
@@ -671,6 +730,7 @@ def summary(records: list[dict[str, Any]], candidate: str) -> str:
         got = hits[0]["pattern"] if hits else "not run"
         lines.append(f"| class at vbar = {groups['vbar']} | {cls} | {got} | |")
     lines += si_section(recs)
+    lines += lvb_section(recs)
     lines += ["", "## All points", "",
               "| row | groups | class | A | lambda_x | lambda_prog | CV A | CV lambda "
               "| settled CV A / lambda | cycles | loops | crossings | R0 | wall s | error |",
@@ -882,7 +942,7 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     shown = headline([r for r in records if r["candidate"] == candidate])
     recs = [r for r in shown if r["preset"] == SERP]
     coils = [r for r in shown if r["preset"] == COIL]
-    fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
+    fig, axes = plt.subplots(3, 4, figsize=(17, 10.5))
     # A and lambda vs vbar, one curve per kappa_c (phi = 0, baseline H, I)
     by_k: dict[float, list[dict[str, Any]]] = {}
     for r in recs:
@@ -946,6 +1006,21 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
                 mfc="none", label=f"lambda_x vs {key}")  # fmt: skip
     ax.set(xscale="log", xlabel="Hbar or Ibar", title="serpentines, vbar = 0.037")
     ax.legend(fontsize=7)
+    # coils against L_vb, in micrometres (the adhesion e_v changed: lvb_groups)
+    from cnt_env import units
+
+    l0 = units.preset(COIL).L_vb * 1e6
+    rs = sorted((r for r in coils if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
+    lv = [l0 * lvb_ratio(r) for r in rs]
+    ax = axes[0, 3]
+    r0_um = [(r["coil_radius"] or math.nan) * x for r, x in zip(rs, lv, strict=True)]
+    ax.plot(lv, r0_um, "o-", label="model (no point: no coil)")
+    if lv:
+        ax.plot([0, max(lv)], [0, 7.64 * max(lv)], "k--", lw=0.8, label="R0 = 7.64 L_vb")
+    ax.set(xlabel="L_vb (um)", ylabel="coil R0 (um)", title="coils against L_vb (e_v)")
+    ax.legend(fontsize=7)
+    for ax in (axes[1, 3], axes[2, 3]):
+        ax.axis("off")
     fig.suptitle(f"candidate {candidate}")
     fig.tight_layout()
     fig.savefig(out / f"trends_{candidate}.png", dpi=110)

@@ -210,3 +210,23 @@ def test_a_point_off_the_table_lists_the_table_points_it_could_mean(tmp_path: Pa
     err = capsys.readouterr().err
     assert "vbar=0.019" in err and "vbar=0.037" in err and "cnt-sim run" in err
     assert not (tmp_path / "results.jsonl").exists()
+
+
+@pytest.mark.parametrize("ratio", reproduce.LVB_RATIOS)
+def test_the_lvb_row_is_the_si_conversion_of_a_changed_adhesion(ratio: float) -> None:
+    """The coil_Lvb row changes L_vb by the adhesion e_v alone: its groups are the SI
+    conversion of the paper's coil with e_v / ratio^2 (the paper's tube, H and gas), each
+    in the ratio to the SI baseline's groups, and the row reads its L_vb back from Hbar."""
+    from cnt_env import units
+
+    si = units.preset("coil")
+    base = si.to_dimensionless()
+    changed = dataclasses.replace(si, e_v=si.e_v / ratio**2, delta=None).to_dimensionless()
+    groups = reproduce.lvb_groups(ratio)
+    paper = units.paper_groups("coil")
+    for name in ("Hbar", "Ibar", "ks_over_ev", "r0_bar"):
+        want = getattr(changed, name) / getattr(base, name)
+        assert groups[name] / getattr(paper, name) == pytest.approx(want, rel=1e-12), name
+    rec = {"row": "coil_Lvb", "Hbar": groups["Hbar"]}
+    assert reproduce.lvb_ratio(rec) == pytest.approx(ratio, rel=1e-12)
+    assert reproduce.lvb_ratio({"row": "coil_groups", "Hbar": 100.0}) == 1.0
