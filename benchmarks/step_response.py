@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=OUT)
     p.add_argument("--env-kwargs", type=json.loads, default={},
                    help='JSON env keywords on top of the defaults, e.g. \'{"drag_law": '
-                        '"linear", "delta_bar": 0.2}\' (the mesh-converged model)')  # fmt: skip
+                        '"linear", "delta_bar": 0.2}\' (the model)')  # fmt: skip
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     # the thin task: control steps of ~1 L_vb (1.5 H̄), finer than any choice measured here

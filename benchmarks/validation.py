@@ -61,7 +61,7 @@ def _suite_defaults() -> dict[str, dict]:
 
 
 #: the mesh sequence of the delta study (RESULTS.md, issue 12, "The delta study")
-DELTA_STUDY = (1.0, 0.5, 0.25, 0.2)
+DELTA_STUDY = (1.0, 0.5, 0.25, 0.2, 0.125, 0.1)
 #: the off-baseline points of the issue-12 configuration study
 TREND_POINTS = (("vbar", 0.019), ("vbar", 0.07), ("vbar", 0.12), ("phi", 0.87), ("phi", 1.2),
                 ("kappa_c_bar", 0.1))  # fmt: skip

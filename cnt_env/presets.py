@@ -39,8 +39,10 @@ __all__ = [
 #: into the steps (sliding "C"), the snap applied between steps ("jump"), no substrate
 #: friction beyond the gas drag, the far deposited tail clamped in x, y and z, and the
 #: paper's flow, uniform in height (a boundary layer is FLOW_PROFILES' other choice); on
-#: MESH's rod of delta_bar = 0.2, where the coil's R0 and the serpentine's amplitude are
-#: converged in delta (candidate C_fine of benchmarks/reproduce.py). DepositionConfig
+#: MESH's rod of delta_bar = 0.2, where the serpentine's amplitude is converged in delta
+#: (<= 2% per halving) and the coil's R0 meets the paper's (it still rises ~3% per
+#: halving; the wavelength ~13%: RESULTS.md, "The delta study carried to delta_bar 0.1")
+#: (candidate C_fine of benchmarks/reproduce.py). DepositionConfig
 #: takes its defaults from here; the other candidates of the study stay named options,
 #: and SURROGATE is the fast one the agents are trained on.
 MODEL: MappingProxyType[str, Any] = MappingProxyType({

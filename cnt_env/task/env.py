@@ -252,7 +252,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
-    * v0, revision 5 (issue 12's model): the default physics is the mesh-converged model
+    * v0, revision 5 (issue 12's model): the default physics is the model on a fine mesh
       (``presets.MODEL`` and ``MESH``: the linear drag law on a rod of delta_bar = 0.2)
       instead of the printed law at delta_bar = 1, which stays as the fast surrogate
       (``presets.SURROGATE``: ``drag_law="printed", delta_bar=1.0``, 13.8x the trace per
