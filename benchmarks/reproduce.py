@@ -308,6 +308,14 @@ def lvb_ratio(rec: dict[str, Any]) -> float:
     return units.paper_groups(COIL).Hbar / rec["Hbar"]
 
 
+def lvb_um(rec: dict[str, Any]) -> float:
+    """L_vb of a record in micrometres: its substrate's for the paper's tube
+    (units.preset), times lvb_ratio."""
+    from cnt_env import units
+
+    return units.preset(rec["preset"]).L_vb * 1e6 * lvb_ratio(rec)
+
+
 #: the study's screening rows (issue 12: v row, phi row, kappa_c row), most telling first
 STUDY_POINTS = (
     [_point("vbar", SERP, vbar=v) for v in (0.019, 0.12)]
@@ -676,7 +684,7 @@ def si_section(recs: list[dict[str, Any]]) -> list[str]:
         if not hits:
             lines.append(f"| {what} | {low:g}-{high:g} | not run | 0 | |")
             continue
-        um = [r[qty] * l_um[r["preset"]] * lvb_ratio(r) for r in hits]
+        um = [r[qty] * lvb_um(r) for r in hits]
         inside = sum(low <= v <= high for v in um)
         got = f"{min(um):.2f}-{max(um):.2f}"
         if qty == "amplitude":
@@ -690,7 +698,6 @@ def lvb_section(recs: list[dict[str, Any]]) -> list[str]:
     R0 / (7.64 L_vb): 1 where the coil scales with L_vb as the paper's baseline R0_bar."""
     from cnt_env import units
 
-    l0 = units.preset(COIL).L_vb * 1e6
     pts = sorted((r for r in recs if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
     if len(pts) < 2:
         return []
@@ -698,8 +705,7 @@ def lvb_section(recs: list[dict[str, Any]]) -> list[str]:
              "paper's)", "", "| e_v (J/m) | L_vb (um) | Hbar | Ibar | R0_bar | R0 (um) | "
              "R0 / (7.64 L_vb) |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in pts:
-        ratio = lvb_ratio(r)
-        lvb = l0 * ratio
+        ratio, lvb = lvb_ratio(r), lvb_um(r)
         r0 = r.get("coil_radius")
         got = (f"{r0:.2f} | {r0 * lvb:.3f} | {r0 / 7.64:.3f}" if r0 else
                f"no coil ({r['pattern']}) | - | -")  # fmt: skip
@@ -1007,11 +1013,8 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     ax.set(xscale="log", xlabel="Hbar or Ibar", title="serpentines, vbar = 0.037")
     ax.legend(fontsize=7)
     # coils against L_vb, in micrometres (the adhesion e_v changed: lvb_groups)
-    from cnt_env import units
-
-    l0 = units.preset(COIL).L_vb * 1e6
     rs = sorted((r for r in coils if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
-    lv = [l0 * lvb_ratio(r) for r in rs]
+    lv = [lvb_um(r) for r in rs]
     ax = axes[0, 3]
     r0_um = [(r["coil_radius"] or math.nan) * x for r, x in zip(rs, lv, strict=True)]
     ax.plot(lv, r0_um, "o-", label="model (no point: no coil)")
