@@ -316,6 +316,11 @@ def lvb_um(rec: dict[str, Any]) -> float:
     return units.preset(rec["preset"]).L_vb * 1e6 * lvb_ratio(rec)
 
 
+def lvb_points(recs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The coils against L_vb: the baseline coil and the coil_Lvb row, by L_vb."""
+    return sorted((r for r in recs if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
+
+
 #: the study's screening rows (issue 12: v row, phi row, kappa_c row), most telling first
 STUDY_POINTS = (
     [_point("vbar", SERP, vbar=v) for v in (0.019, 0.12)]
@@ -698,7 +703,7 @@ def lvb_section(recs: list[dict[str, Any]]) -> list[str]:
     R0 / (7.64 L_vb): 1 where the coil scales with L_vb as the paper's baseline R0_bar."""
     from cnt_env import units
 
-    pts = sorted((r for r in recs if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
+    pts = lvb_points(recs)
     if len(pts) < 2:
         return []
     lines = ["", "## Coils against L_vb (the adhesion e_v changed; tube, H and gas the "
@@ -1013,7 +1018,7 @@ def figures(records: list[dict[str, Any]], candidate: str, out: Path) -> None:
     ax.set(xscale="log", xlabel="Hbar or Ibar", title="serpentines, vbar = 0.037")
     ax.legend(fontsize=7)
     # coils against L_vb, in micrometres (the adhesion e_v changed: lvb_groups)
-    rs = sorted((r for r in coils if r["row"] in ("coil", "coil_Lvb")), key=lvb_ratio)
+    rs = lvb_points(coils)
     lv = [lvb_um(r) for r in rs]
     ax = axes[0, 3]
     r0_um = [(r["coil_radius"] or math.nan) * x for r, x in zip(rs, lv, strict=True)]
