@@ -174,7 +174,9 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(sim_options={"contact": {"adhesion": "glue"}}),
      dict(sim_options={"contact": {"range": 0.1}}),
      dict(tolerance="wide"), dict(vbar_max=True),
-     dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(trace_window=0.0),
+     dict(score="wide"), dict(route_width=0.5), dict(difficulty=1.5), dict(difficulty=[0.2]),
+     dict(difficulty=[0.8, 0.2]), dict(difficulty=[0.0, 1.5]), dict(difficulty="hard"),
+     dict(difficulty=[0.1, math.nan]), dict(trace_window=0.0),
      dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324),
      dict(flow_gain=0.0), dict(flow_gain=math.nan), dict(vbar=0.3, flow_gain=2.0)],
 )  # fmt: skip
@@ -906,6 +908,32 @@ def test_record_video_writes_an_mp4(kw: dict, tmp_path) -> None:
     env.close()
     videos = list(folder.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
+
+
+def test_a_difficulty_range_gives_each_drawn_route_its_own() -> None:
+    """difficulty=[lo, hi]: each drawn route takes a difficulty uniform in the range, so
+    the corridor half-width (20 at difficulty 0 down to 13 at 1, +-1, x ROUTE_SCALE)
+    spreads over the range's widths, not one value's +-1; the same seed draws the same
+    route; [d, d] is the number d, stream and all."""
+    from cnt_env.task import routes
+
+    small = {k: v for k, v in SMALL.items() if k != "score"}  # the route task
+
+    def widths(difficulty: object, seeds: range) -> list[float]:
+        env = CNTDepositEnv(**small, families="straight", difficulty=difficulty)
+        out = []
+        for seed in seeds:
+            env.reset(seed=seed)
+            out.append(env.target.width / routes.ROUTE_SCALE)
+        return out
+
+    ranged = widths([0.0, 1.0], range(12))
+    assert min(ranged) >= 12.0 and max(ranged) <= 21.0
+    assert max(ranged) - min(ranged) > 3.0  # one difficulty spreads over 2 at most
+    fixed = widths(0.5, range(12))
+    assert max(fixed) - min(fixed) <= 2.0
+    assert widths([0.0, 1.0], range(3)) == ranged[:3]
+    assert widths([0.5, 0.5], range(3)) == fixed[:3]
 
 
 def test_set_route_draw_changes_the_next_routes_and_refuses_bad_values() -> None:

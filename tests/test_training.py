@@ -22,6 +22,8 @@ SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
 RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
 #: goes on training the shipped agent (cnt-train --trained-agent) on the calibrated surrogate
 SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
+#: second stages over the shipped agent's base: the calibrated surrogate, detours 3 in 10
+SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml")
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
@@ -746,7 +748,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
         # the longest suffix that matches (_open_then_detour.yml also ends in _detour.yml)
         suffix = max((k for k in detour_share if path.name.endswith(k)), key=len, default=None)
         twin_of = path.name.removesuffix(suffix or ".yml") + ".yml"  # a weighted twin: its physics
-        shipped_last_stage = path.name == SHIPPED_FINETUNE or path == shipped_residual
+        shipped_last_stage = path.name in SECOND_STAGES or path == shipped_residual
         config = load_config(path)
         env_kwargs, steps = env_settings(config)
         env = make_env(env_kwargs, steps)  # constructs the simulator config; no reset
@@ -760,6 +762,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             else:
                 assert base.flow_gain == 1.0, path.name
             share = (base.families.count("detour"), len(base.families))
+            ranged = path.name.startswith("ppo_residual_difficulty_range")
+            assert base.difficulty == ((0.25, 1.0) if ranged else 0.5), path.name
             if suffix is not None:  # the detour family repeated in the drawn families
                 assert share == detour_share[suffix], path.name
             elif shipped_last_stage:

@@ -227,7 +227,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `reset_advance`    | 4.0          | max random advance at reset (control intervals) |
     | `score`            | "corridor"   | "corridor" (routes) or "thin" (v0 polylines)    |
     | `route_width`      | 18.5         | corridor half-width of bare polylines (L_vb)    |
-    | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]      |
+    | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]; or  |
+    |                    |              | [lo, hi]: each drawn route's own, uniformly     |
     | `families`         | all          | families drawn uniformly; repeat one to weight  |
     | `route_file`       | None         | draw your own routes instead of `families`      |
     |                    |              | (routes.load_file; JSON/YAML; docs/task.md)     |
@@ -319,7 +320,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         route_file: str | None = None,
         score: str = "corridor",
         route_width: float = DEFAULT_HALF_WIDTH,
-        difficulty: float = routes.DEFAULT_DIFFICULTY,
+        difficulty: float | Sequence[float] = routes.DEFAULT_DIFFICULTY,
         trace_window: float | None = None,
         obs_mode: str = "vector",
         image_size: int = 64,
@@ -493,11 +494,14 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         return obs, info
 
     def set_route_draw(
-        self, families: Sequence[str] | str | None = None, difficulty: float | None = None
+        self,
+        families: Sequence[str] | str | None = None,
+        difficulty: float | Sequence[float] | None = None,
     ) -> None:
         """Change how training targets are drawn, from the next reset on (a curriculum:
         training.callbacks.Curriculum calls it through ``VecEnv.env_method``). ``families``
-        as the constructor's (None: unchanged), ``difficulty`` in [0, 1] (None: unchanged).
+        as the constructor's (None: unchanged), ``difficulty`` in [0, 1] or a range [lo, hi]
+        (None: unchanged).
         Both are checked before either changes."""
         known = routes.families_of(self.score_mode)
         fams = self.families if families is None else settings.families_tuple(families, known)
@@ -519,8 +523,18 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if spec is None:
             if self.route_pool:  # route_file: the user's routes instead of the families
                 return self.route_pool[int(rng.integers(len(self.route_pool)))]
-            return routes.sample(rng, self.families, self.difficulty)
-        return routes.resolve(spec, rng, self.difficulty, self.route_width)
+            return routes.sample(rng, self.families, self._draw_difficulty(rng))
+        drawn = isinstance(spec, str) and spec in routes.FAMILIES  # a family name is drawn
+        d = self._draw_difficulty(rng) if drawn else routes.DEFAULT_DIFFICULTY
+        return routes.resolve(spec, rng, d, self.route_width)
+
+    def _draw_difficulty(self, rng: np.random.Generator) -> float:
+        """The difficulty of a drawn route: the set value, or uniform in a range [lo, hi]
+        (one extra draw from ``rng`` only then, so a fixed difficulty's stream is as
+        before)."""
+        if isinstance(self.difficulty, tuple):
+            return float(rng.uniform(*self.difficulty))
+        return self.difficulty
 
     def _begin_episode(self, target: Route | targets_mod.Target) -> None:
         sim = self._sim

@@ -119,14 +119,27 @@ def families_tuple(value: Any, known: Mapping[str, Any]) -> tuple[str, ...]:
     return names
 
 
-def difficulty_value(value: Any) -> float:
-    """Route difficulty: a number in [0, 1]."""
+def difficulty_value(value: Any) -> float | tuple[float, float]:
+    """Route difficulty: a number in [0, 1], or a range ``[lo, hi]`` in [0, 1] (lo <= hi)
+    from which each drawn route takes its own difficulty, uniformly (``np_random``)."""
+    if isinstance(value, (list, tuple)):
+        if len(value) != 2:
+            raise ValueError(f"a difficulty range is [lo, hi], got {value!r}")
+        lo, hi = (_difficulty_number(v, value) for v in value)
+        if lo > hi:
+            raise ValueError(f"a difficulty range [lo, hi] needs lo <= hi, got {value!r}")
+        return (lo, hi) if lo < hi else lo
+    return _difficulty_number(value, value)
+
+
+def _difficulty_number(value: Any, given: Any) -> float:
     try:
         d = float(value)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"difficulty must be a number in [0, 1], got {value!r}") from exc
-    if not 0.0 <= d <= 1.0:
-        raise ValueError(f"difficulty must be in [0, 1], got {value!r}")
+        raise ValueError(f"difficulty must be a number in [0, 1] or a range [lo, hi], "
+                         f"got {given!r}") from exc  # fmt: skip
+    if not 0.0 <= d <= 1.0:  # NaN fails here too
+        raise ValueError(f"difficulty must be in [0, 1], got {given!r}")
     return d
 
 
