@@ -10,7 +10,7 @@ larger validation set would pick from each run, and how well the two agree.
 
     python benchmarks/checkpoint_selection.py --models DIR [DIR ...] \
         --names ppo_a40,ppo_abest,... --routes 12 --jobs 2 [--heldout RESULTS_DIR] \
-        [--out FILE.json]
+        [--difficulty D] [--out FILE.json]
 
 A name ``a+b`` is the ensemble of models a and b (``cnt-evaluate``'s, the mean of their
 actions).
@@ -33,14 +33,17 @@ import numpy as np
 from cnt_env.cli.common import name_list
 
 
-def _episode(job: tuple[str, str, int, str]) -> tuple[str, int, float]:
-    """Score of model ``name`` (or the follower, ``scripted``) on validation route i."""
+def _episode(job: tuple[str, str, int, str, float | None]) -> tuple[str, int, float]:
+    """Score of model ``name`` (or the follower, ``scripted``) on validation route i (drawn
+    at ``difficulty``; None: the config's)."""
     from training.common import VALIDATION_SEED0, env_settings, limit_threads, load_config, make_env
     from training.evaluate import _make_policy, _play, ensemble_members, model_file
 
     limit_threads()
-    models, name, i, config = job
+    models, name, i, config, difficulty = job
     env_kwargs, max_steps = env_settings(load_config(config))
+    if difficulty is not None:
+        env_kwargs = {**env_kwargs, "difficulty": difficulty}
     env = make_env(env_kwargs, max_steps)
     spec = (
         {"kind": "scripted"}
@@ -71,11 +74,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--routes", type=int, default=12)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--config", default=str(CONFIG_DIR / "ppo_residual.yml"))
+    p.add_argument("--difficulty", type=float, default=None,
+                   help="draw the validation routes at this difficulty (default: the config's)")  # fmt: skip
     p.add_argument("--heldout", default=None, help="cnt-evaluate results dir of the models")
     p.add_argument("--out", default=None, help="JSON file of the scores")
     args = p.parse_args(argv)
     names = ["scripted", *args.names]
-    jobs = [(args.models, n, i, args.config) for n in names for i in range(args.routes)]
+    jobs = [(args.models, n, i, args.config, args.difficulty)
+            for n in names for i in range(args.routes)]  # fmt: skip
     t0 = time.perf_counter()
     scores: dict[str, list[float]] = {n: [float("nan")] * args.routes for n in names}
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
@@ -112,6 +118,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.out:
         Path(args.out).write_text(json.dumps({
             "routes": args.routes, "models": args.models, "config": args.config,
+            "difficulty": args.difficulty,
             "validation": scores, "validation_mean": val, "heldout_mean": held,
             "picks": picks, "wall_s": round(wall, 1),
         }, indent=1) + "\n")  # fmt: skip
