@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from policies import PRETRAINED_DIR, load_policy
 
@@ -1023,3 +1024,50 @@ def test_bad_training_input_is_a_usage_error_that_makes_nothing(
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
     assert list(work.iterdir()) == []  # no run or results directory, no runs/ default
+
+
+def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
+    tmp_path: Path,
+) -> None:
+    """training.two_stage: stage 2 goes on training stage 1's final model over its own
+    base options (recorded as base_kwargs_was), with n_timesteps = the time left x the
+    rate; nothing left, or a stage 2 that cannot take stage 1's agent, is refused before
+    anything trains."""
+    from training.two_stage import main as two_stage_main
+    from training.two_stage import run_two_stages, stage2_budget
+
+    def residual(**base_kwargs: float) -> dict:
+        return {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+            {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3,
+                                                "base_kwargs": base_kwargs}}]}  # fmt: skip
+
+    stage1, stage2 = residual(), residual(lookahead=12.0)
+    model = run_two_stages("ppo", stage1, stage2, tmp_path / "run", seed=0, stage2_seed=0,
+                           stage1_s=600.0, total_s=900.0, steps_per_second=0.1,
+                           startup_s=45.0)  # fmt: skip
+    first = tmp_path / "run" / "stage1" / "ppo.zip"
+    assert model == tmp_path / "run" / "stage2" / "ppo.zip" and first.is_file()
+    resolved = yaml.safe_load((model.parent / "config.yml").read_text())
+    record = resolved["run"]["trained_agent"]
+    assert record["path"] == str(first) and record["base_kwargs_was"]["lookahead"] == 20.0
+    base = resolved["CNTDeposit-v0"]["env_wrapper"][0]["training.common.ResidualAction"]
+    assert base["base_kwargs"]["lookahead"] == 12.0
+    timing = json.loads((tmp_path / "run" / "timing.json").read_text())
+    assert timing["stage2_n_timesteps"] == int(timing["stage2_budget_s"] * 0.1)
+    assert resolved["CNTDeposit-v0"]["n_timesteps"] == timing["stage2_n_timesteps"]
+    assert resolved["run"]["max_wall_seconds"] == pytest.approx(timing["stage2_budget_s"], abs=0.1)
+    assert timing["stage2_budget_s"] == pytest.approx(900.0 - 45.0 - timing["stage1_s"], abs=0.2)
+
+    assert stage2_budget(100.0, 20.0, 10.0, 2.0) == (70.0, 140)
+    with pytest.raises(ValueError, match="no time is left"):
+        stage2_budget(100.0, 90.0, 45.0, 50.0)
+    cfg1, cfg2 = tmp_path / "s1.yml", tmp_path / "s2.yml"
+    cfg1.write_text(yaml.safe_dump({"CNTDeposit-v0": stage1}))
+    other_scale = residual()
+    other_scale["env_wrapper"][0]["training.common.ResidualAction"]["scale"] = 0.5
+    cfg2.write_text(yaml.safe_dump({"CNTDeposit-v0": other_scale}))
+    for argv in (["--stage1-seconds", "900", "--total-seconds", "900"], []):
+        with pytest.raises(SystemExit) as stop:
+            two_stage_main(["--stage1", str(cfg1), "--stage2", str(cfg2), *argv,
+                            "--out", str(tmp_path / "cli")])  # fmt: skip
+        assert stop.value.code == 2 and not (tmp_path / "cli").exists()

@@ -358,6 +358,18 @@ def check_trained_agent(
         raise ValueError(f"{path.with_suffix('.yml')}, the resolved config cnt-train "
                          "writes beside a model, is missing: cannot tell what the agent "
                          "acts on")  # fmt: skip
+    has_stats = vecnormalize_path(path).with_suffix(".npz").is_file()
+    record = check_acts_alike(saved, config, new_base_options, has_stats, path.name)
+    return {"path": str(path), "sha256": file_sha256(path), "run": run, **record}
+
+
+def check_acts_alike(saved: dict[str, Any], config: dict[str, Any], new_base_options: bool,
+                     normalised: bool, name: str) -> dict[str, Any]:  # fmt: skip
+    """Refuse ``config`` to go on training an agent trained with the config entry ``saved``
+    (``normalised``: with VecNormalize statistics) unless the agent acts on the same thing
+    (:func:`check_trained_agent`; ``name`` names the agent in the errors). Returns
+    ``{"base_kwargs_was": ...}`` when only the base's options differ and
+    ``new_base_options`` allows it, else ``{}``."""
     env_kwargs, _ = env_settings(config)
     mode = score_mode(env_kwargs)
     was = to_jsonable(residual_settings(pin_base(saved, mode)))
@@ -366,20 +378,19 @@ def check_trained_agent(
     if was != now:
         same_base = None not in (was, now) and _but_options(was) == _but_options(now)
         if not (new_base_options and same_base):
-            raise ValueError(f"{path.name} was trained with the residual settings {was}; "
+            raise ValueError(f"{name} was trained with the residual settings {was}; "
                              f"this config gives {now}: set the config's ResidualAction to "
                              "the agent's (or pass --new-base-options if only the base's "
                              "options differ)")  # fmt: skip
         record["base_kwargs_was"] = was["base_kwargs"]
     if frame_stack(saved) != frame_stack(config):
-        raise ValueError(f"{path.name} was trained on a frame stack of {frame_stack(saved)}, "
+        raise ValueError(f"{name} was trained on a frame stack of {frame_stack(saved)}, "
                          f"the config asks for {frame_stack(config)}")  # fmt: skip
-    has_stats = vecnormalize_path(path).with_suffix(".npz").is_file()
-    if has_stats != bool(normalize_settings(config)):
-        raise ValueError(f"{path.name} was trained {'with' if has_stats else 'without'} "
+    if normalised != bool(normalize_settings(config)):
+        raise ValueError(f"{name} was trained {'with' if normalised else 'without'} "
                          "VecNormalize statistics (normalize: true) and the config "
-                         f"{'does not normalise' if has_stats else 'normalises'}")  # fmt: skip
-    return {"path": str(path), "sha256": file_sha256(path), "run": run, **record}
+                         f"{'does not normalise' if normalised else 'normalises'}")  # fmt: skip
+    return record
 
 
 def _checkpoint_callback(base):
