@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--config", default=str(CONFIG_DIR / "ppo_residual.yml"))
     p.add_argument("--difficulty", type=float, default=None,
-                   help="draw the validation routes at this difficulty (default: the config's)")  # fmt: skip
+                   help="draw routes at this difficulty (None: config's)")  # fmt: skip
     p.add_argument("--heldout", default=None, help="cnt-evaluate results dir of the models")
     p.add_argument("--out", default=None, help="JSON file of the scores")
     args = p.parse_args(argv)
