@@ -523,18 +523,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if spec is None:
             if self.route_pool:  # route_file: the user's routes instead of the families
                 return self.route_pool[int(rng.integers(len(self.route_pool)))]
-            return routes.sample(rng, self.families, self._draw_difficulty(rng))
-        drawn = isinstance(spec, str) and spec in routes.FAMILIES  # a family name is drawn
-        d = self._draw_difficulty(rng) if drawn else routes.DEFAULT_DIFFICULTY
-        return routes.resolve(spec, rng, d, self.route_width)
-
-    def _draw_difficulty(self, rng: np.random.Generator) -> float:
-        """The difficulty of a drawn route: the set value, or uniform in a range [lo, hi]
-        (one extra draw from ``rng`` only then, so a fixed difficulty's stream is as
-        before)."""
-        if isinstance(self.difficulty, tuple):
-            return float(rng.uniform(*self.difficulty))
-        return self.difficulty
+            return routes.sample(rng, self.families, self.difficulty)
+        return routes.resolve(spec, rng, self.difficulty, self.route_width)
 
     def _begin_episode(self, target: Route | targets_mod.Target) -> None:
         sim = self._sim

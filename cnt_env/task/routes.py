@@ -407,13 +407,27 @@ def families_of(score: str) -> Mapping[str, Any]:
     return FAMILIES if score == "corridor" else targets_mod.FAMILIES
 
 
+#: A difficulty, or a range (lo, hi) from which each drawn route takes its own.
+Difficulty = float | tuple[float, float]
+
+
+def drawn_difficulty(rng: np.random.Generator, difficulty: Difficulty) -> float:
+    """``difficulty``, or for a range (lo, hi) one value uniform in it from ``rng`` (the
+    only draw a range adds, so a fixed difficulty's stream is unchanged)."""
+    if isinstance(difficulty, tuple):
+        return float(rng.uniform(*difficulty))
+    return difficulty
+
+
 def sample(rng: np.random.Generator, families: Sequence[str] | None = None,
-           difficulty: float = DEFAULT_DIFFICULTY) -> Route:  # fmt: skip
-    """A training route: a family chosen uniformly, then drawn. Never a held-out one."""
+           difficulty: Difficulty = DEFAULT_DIFFICULTY) -> Route:  # fmt: skip
+    """A training route: a family chosen uniformly, then drawn (at ``difficulty``, or at
+    one drawn from its range first). Never a held-out one."""
     names = tuple(FAMILIES) if families is None else tuple(families)
     if not names:
         raise ValueError("families must name at least one family")
-    return draw(names[int(rng.integers(len(names)))], rng, difficulty)
+    d = drawn_difficulty(rng, difficulty)
+    return draw(names[int(rng.integers(len(names)))], rng, d)
 
 
 # --------------------------------------------------------------------------- held out
@@ -550,7 +564,7 @@ def load_file(path: str | Path) -> dict[str, Route]:
     return out
 
 
-def resolve(spec: Any, rng: np.random.Generator, difficulty: float = DEFAULT_DIFFICULTY,
+def resolve(spec: Any, rng: np.random.Generator, difficulty: Difficulty = DEFAULT_DIFFICULTY,
             width: float = DEFAULT_HALF_WIDTH) -> Route:  # fmt: skip
     """What ``reset(options={"target": spec})`` accepts, as a :class:`Route` (module doc).
     A bare polyline gets the corridor half-width ``width``; a thin-task
@@ -561,7 +575,7 @@ def resolve(spec: Any, rng: np.random.Generator, difficulty: float = DEFAULT_DIF
         return Route(spec.points, width, name=spec.name, params=spec.params)
     if isinstance(spec, str):
         if spec in FAMILIES:
-            return draw(spec, rng, difficulty)
+            return draw(spec, rng, drawn_difficulty(rng, difficulty))
         if spec in HELD_OUT:
             return held_out(spec)
         if spec in targets_mod.HELD_OUT or spec in targets_mod.FAMILIES:
