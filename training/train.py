@@ -450,6 +450,14 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_config(config: dict[str, Any]) -> None:
+    """Every check of a config that needs no env (ValueError saying what is wrong): the
+    run's numbers, the callbacks and the curriculum."""
+    check_run_config(config)
+    check_callbacks(config)
+    curriculum_settings(config)
+
+
 def _resolved_config(args: argparse.Namespace) -> dict[str, Any]:
     """The config with the command line's overrides, checked (ValueError saying what is
     wrong): the run's numbers, the callbacks, the curriculum and a --trained-agent."""
@@ -463,9 +471,7 @@ def _resolved_config(args: argparse.Namespace) -> dict[str, Any]:
         config["env_kwargs"] = {**(config["env_kwargs"] or {}),
                                 "max_episode_steps": args.max_episode_steps}  # fmt: skip
         config.pop("max_episode_steps", None)
-    check_run_config(config)
-    check_callbacks(config)
-    curriculum_settings(config)
+    check_config(config)
     if args.trained_agent is not None:
         check_trained_agent(args.trained_agent, args.algo, config, args.new_base_options)
     return config

@@ -37,16 +37,15 @@ from pathlib import Path
 from typing import Any
 
 from .common import (
-    check_callbacks,
     check_dir_option,
-    check_run_config,
     fresh_dir,
     load_config,
     normalize_settings,
+    parse_cli,
     positive_float,
     seed_int,
 )
-from .train import check_acts_alike, train
+from .train import check_acts_alike, check_config, train
 
 __all__ = ["main", "run_two_stages", "stage2_budget"]
 
@@ -107,14 +106,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_cli(parser, argv)
     if args.stage1_seconds >= args.total_seconds:
         parser.error("--stage1-seconds must be below --total-seconds (stage 2 needs time)")
     try:  # both configs checked before anything trains
         stage1, stage2 = load_config(args.stage1), load_config(args.stage2)
         for config in (stage1, stage2):
-            check_run_config(config)
-            check_callbacks(config)
+            check_config(config)
         # stage 2 must accept stage 1's agent (cnt-train --trained-agent's check)
         check_acts_alike(stage1, stage2, True, bool(normalize_settings(stage1)),
                          f"stage 1's agent ({args.stage1.name})")  # fmt: skip
