@@ -67,6 +67,9 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
         "score": float(info["score"]), "shorts": int(info["shorts"]),
         "completed": bool(info["completed"]), "steps": steps,
         "deviations": sum(k > 0 for k in oracle.history), "rollouts": oracle.rollouts,
+        # the candidate played at each control step (0: the follower's own action, then
+        # the turns, then the speeds: training.oracle.candidates)
+        "choices": list(oracle.history),
         "turns": job["turns"], "speeds": job["speeds"], "config": job["config"],
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip
