@@ -30,11 +30,6 @@ sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import float_list, name_list, seed_list  # noqa: E402
 
 OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
-#: the env the held-out scores (and so the goal's margin) are measured on. Until
-#: 2026-12-02 the oracle read ``training/configs/ppo.yml``, which pins the fast surrogate
-#: since 2026-11-26: the rows of ``mpc_oracle.jsonl`` were made before that, on the env's
-#: default of then (the printed law at delta_bar 1, today's surrogate).
-EVAL = ROOT / "training/configs/eval.yml"
 
 
 def episode(job: dict[str, Any]) -> dict[str, Any]:
@@ -77,6 +72,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     from cnt_env.task.routes import HELD_OUT
+    from training.common import EVAL_CONFIG
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--targets", type=name_list, default=",".join(HELD_OUT))
@@ -85,8 +81,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--speeds", type=float_list, default="0.5", help="fractions of the follower's speed"
     )
+    # the env the held-out scores (and so the goal's margin) are measured on. Until
+    # 2026-12-02 the oracle read training/configs/ppo.yml, which pins the fast surrogate
+    # since 2026-11-26: the rows of mpc_oracle.jsonl were made before that, on the env's
+    # default of then (the printed law at delta_bar 1, today's surrogate).
     ap.add_argument(
-        "--config", type=Path, default=EVAL,
+        "--config", type=Path, default=EVAL_CONFIG,
         help="YAML whose env_kwargs set the env (default: the held-out evaluation's, the model)",
     )  # fmt: skip
     ap.add_argument("--jobs", type=int, default=2)

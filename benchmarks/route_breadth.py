@@ -59,13 +59,13 @@ def routes() -> dict[str, dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.common import env_settings, load_config
+    from training.common import EVAL_CONFIG, env_settings, load_config
     from training.evaluate import run_episode
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=seed_list, default="0,1", help="comma separated episode seeds")
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--config", type=Path, default=ROOT / "training/configs/eval.yml")
+    ap.add_argument("--config", type=Path, default=EVAL_CONFIG)
     ap.add_argument("--model", type=Path, default=ROOT / "policies/pretrained/ppo_residual.zip")
     ap.add_argument("--out", type=Path, default=None, help="write the rows here (JSON)")
     ap.add_argument("--write-routes", type=Path, default=None,

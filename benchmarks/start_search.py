@@ -36,8 +36,6 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import name_list, seed_list  # noqa: E402
 
-EVAL = ROOT / "training/configs/eval.yml"
-
 
 def _outside(env: Any, first: float) -> tuple[float, float, float]:
     """``(outside in the first L_vb, outside after, laid)`` of the episode's trace so far."""
@@ -114,6 +112,7 @@ def search(job: dict[str, Any]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     from cnt_env.task.routes import HELD_OUT
+    from training.common import EVAL_CONFIG
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
@@ -124,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--directions", type=int, default=8, help="flow directions per step")
     ap.add_argument("--first", type=float, default=60.0, help="L_vb: the start's share")
     ap.add_argument("--until", type=float, default=150.0, help="L_vb laid per rollout")
-    ap.add_argument("--config", type=Path, default=EVAL)
+    ap.add_argument("--config", type=Path, default=EVAL_CONFIG)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)

@@ -63,6 +63,9 @@ __all__ = [
 
 ENV_ID = "CNTDeposit-v0"
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+#: The env the held-out scores are measured on (the env's default physics, the model):
+#: cnt-evaluate's default, and the default of every benchmark that judges against them.
+EVAL_CONFIG = CONFIG_DIR / "eval.yml"
 #: Keys of a config entry that are not hyperparameters of the algorithm (rl-zoo style).
 NON_ALGO_KEYS = frozenset({
     "n_timesteps", "policy", "n_envs", "normalize", "env_kwargs", "max_episode_steps",

@@ -32,6 +32,7 @@ from .common import (
     CHECKPOINT_CALLBACK,
     CONFIG_DIR,
     EVAL_CALLBACK,
+    EVAL_CONFIG,
     DefaultsHelp,
     check_dir_option,
     env_settings,
@@ -53,7 +54,6 @@ RESULTS = Path(__file__).resolve().parent / "results"
 #: starts at the follower, so two minutes show the pipeline at a sensible score (PPO from
 #: scratch scored anywhere from 0.01 to 0.6 after two minutes, with the machine's speed).
 DEMO_CONFIG = "ppo_residual.yml"
-DEMO_EVAL_CONFIG = "eval.yml"
 #: Pretrained models the demo evaluates (the best one; cnt-evaluate runs them all).
 DEMO_MODELS = ("ppo_residual",)
 #: Share of the budget given to the short training run.
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_cli(p, argv)
     t0 = time.perf_counter()
     budget = 60.0 * args.budget_minutes
-    eval_config = load_config(CONFIG_DIR / DEMO_EVAL_CONFIG)
+    eval_config = load_config(EVAL_CONFIG)
     try:
         targets = held_out_targets(args.targets, held_out_names(env_settings(eval_config)[0]))
     except ValueError as exc:

@@ -72,8 +72,8 @@ from policies.residual import residual_settings
 from policies.sb3 import frame_stack
 
 from .common import (
-    CONFIG_DIR,
     ENV_ID,
+    EVAL_CONFIG,
     VALIDATION,
     DefaultsHelp,
     HeldOutCycle,
@@ -862,7 +862,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "each, or a mapping {name: route dict} (docs/task.md)")  # fmt: skip
     p.add_argument("--seeds", type=seed_list, default="0,1,2",
                    help="comma separated episode seeds")  # fmt: skip
-    p.add_argument("--config", type=Path, default=CONFIG_DIR / "eval.yml",
+    p.add_argument("--config", type=Path, default=EVAL_CONFIG,
                    help="YAML whose env_kwargs / max_episode_steps set the env")  # fmt: skip
     p.add_argument("--models", type=Path, nargs="+", default=[PRETRAINED],
                    help="directories of the models <policy>.zip, their <policy>_vecnormalize"
