@@ -70,7 +70,9 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[dict[str, Any]]]:
+    """The command line and the episodes it asks for: per seed and route, the oracle's
+    and the follower's."""
     from cnt_env.task.routes import HELD_OUT
     from training.common import EVAL_CONFIG
 
@@ -100,6 +102,11 @@ def main(argv: list[str] | None = None) -> int:
         for t in args.targets
         for mode in ("oracle", "follower")
     ]
+    return args, jobs
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, jobs = parse_jobs(argv)
     rows = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(episode, jobs):

@@ -7,48 +7,19 @@ pinned the fast surrogate since 2026-11-26, and measured the wrong model.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 from benchmarks import mpc_oracle  # the repo root is on pytest's pythonpath
 from training.common import env_settings, load_config
 from training.evaluate import build_parser
 
 
-class _Stop(Exception):
-    pass
+def _oracle_config(argv: list[str]) -> str:
+    _, jobs = mpc_oracle.parse_jobs(argv)
+    assert {job["config"] for job in jobs} == {jobs[0]["config"]}
+    return jobs[0]["config"]
 
 
-class _Pool:
-    """Stands in for the process pool: records the first job and runs nothing."""
-
-    seen: ClassVar[dict] = {}
-
-    def __init__(self, *args, **kwargs) -> None:
-        pass
-
-    def __enter__(self) -> _Pool:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        return None
-
-    def map(self, fn, jobs):
-        _Pool.seen = next(iter(jobs))
-        raise _Stop
-
-
-def _oracle_config(argv: list[str], monkeypatch) -> str:
-    monkeypatch.setattr(mpc_oracle, "ProcessPoolExecutor", _Pool)
-    try:
-        mpc_oracle.main(argv)
-    except _Stop:
-        pass
-    return _Pool.seen["config"]
-
-
-def test_the_oracle_plays_the_evaluation_env_by_default(tmp_path, monkeypatch) -> None:
-    argv = ["--targets", "u_turn", "--out", str(tmp_path / "o.jsonl")]
-    oracle = _oracle_config(argv, monkeypatch)
+def test_the_oracle_plays_the_evaluation_env_by_default() -> None:
+    oracle = _oracle_config(["--targets", "u_turn"])
     evaluation = build_parser().parse_args([]).config
     assert env_settings(load_config(oracle)) == env_settings(load_config(evaluation))
     # and the training config, which pins the surrogate, is another env
@@ -56,7 +27,6 @@ def test_the_oracle_plays_the_evaluation_env_by_default(tmp_path, monkeypatch) -
     assert env_settings(load_config(training)) != env_settings(load_config(evaluation))
 
 
-def test_the_oracle_takes_another_config(tmp_path, monkeypatch) -> None:
+def test_the_oracle_takes_another_config() -> None:
     other = mpc_oracle.ROOT / "training/configs/ppo.yml"
-    argv = ["--targets", "u_turn", "--config", str(other), "--out", str(tmp_path / "o.jsonl")]
-    assert _oracle_config(argv, monkeypatch) == str(other)
+    assert _oracle_config(["--targets", "u_turn", "--config", str(other)]) == str(other)
