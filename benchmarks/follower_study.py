@@ -3,8 +3,8 @@ families (never the held-out set): the evidence behind its defaults
 (``policies/route_follower.py``).
 
     python benchmarks/follower_study.py [--families straight,l_route,...] [--seeds 0,1,2]
-        [--variant NAME=JSON ...] [--config training/configs/ppo_residual.yml]
-        [--jobs 2] [--out benchmarks/results/follower_study.jsonl]
+        [--variant NAME=JSON ...] [--config training/configs/eval.yml]
+        [--jobs 2] [--out benchmarks/results/follower_study_converged.jsonl]
 
 Each (variant, family, seed) is one episode of the config's env with
 ``reset(seed=seed, options={"target": family})`` (the family's route drawn from the env's
@@ -28,6 +28,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from cnt_env.cli.common import name_list, seed_list
+from training.common import EVAL_CONFIG
 
 FAMILIES = ("straight", "l_route", "u_route", "staircase", "arc", "band", "pads", "detour")
 VARIANTS = {
@@ -71,16 +72,25 @@ def _episode(job: tuple) -> dict:
         env.close()
 
 
-def main(argv: list[str] | None = None) -> None:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--families", type=name_list, default=",".join(FAMILIES))
     p.add_argument("--seeds", type=seed_list, default="0,1,2")
     p.add_argument("--variant", action="append", default=[],
                    help="NAME=JSON options (default: round3, plan, default)")  # fmt: skip
-    p.add_argument("--config", type=Path, default=ROOT / "training/configs/ppo_residual.yml")
+    # the follower is scored on the held-out evaluation's env (the model); every study in
+    # follower_study_converged.jsonl passed it as --config. Until 2026-12-02 the default
+    # was the residual's training config (the surrogate).
+    p.add_argument("--config", type=Path, default=EVAL_CONFIG)
     p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/follower_study.jsonl")
-    args = p.parse_args(argv)
+    p.add_argument(
+        "--out", type=Path, default=ROOT / "benchmarks/results/follower_study_converged.jsonl"
+    )
+    return p
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = build_parser().parse_args(argv)
     variants = dict(VARIANTS)
     if args.variant:
         variants = {}

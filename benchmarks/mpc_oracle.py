@@ -35,7 +35,7 @@ OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
 def episode(job: dict[str, Any]) -> dict[str, Any]:
     """One episode of the oracle (``job["mode"] == "oracle"``) or of the follower alone."""
     from policies import RouteFollower
-    from training.common import env_settings, load_config, make_env
+    from training.common import env_settings, load_config, make_env, shown_path
     from training.oracle import RolloutOracle
 
     env_kwargs, max_steps = env_settings(load_config(Path(job["config"])))
@@ -65,7 +65,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
         # the candidate played at each control step (0: the follower's own action, then
         # the turns, then the speeds: training.oracle.candidates)
         "choices": list(oracle.history),
-        "turns": job["turns"], "speeds": job["speeds"], "config": job["config"],
+        "turns": job["turns"], "speeds": job["speeds"], "config": shown_path(job["config"], ROOT),
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip
 

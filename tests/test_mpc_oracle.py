@@ -30,3 +30,12 @@ def test_the_oracle_plays_the_evaluation_env_by_default() -> None:
 def test_the_oracle_takes_another_config() -> None:
     other = mpc_oracle.ROOT / "training/configs/ppo.yml"
     assert _oracle_config(["--targets", "u_turn", "--config", str(other)]) == str(other)
+
+
+def test_the_follower_study_plays_the_evaluation_env_by_default() -> None:
+    """The follower is scored on cnt-evaluate's env, so its options are studied there."""
+    from benchmarks import follower_study
+
+    study = follower_study.build_parser().parse_args([]).config
+    evaluation = build_parser().parse_args([]).config
+    assert env_settings(load_config(study)) == env_settings(load_config(evaluation))

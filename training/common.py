@@ -93,6 +93,13 @@ def limit_threads() -> None:
         pass
 
 
+def shown_path(path: str | Path, base: str | Path | None = None) -> str:
+    """``path`` relative to ``base`` (the working directory by default) when under it, so
+    a results file names the repository's file, not one machine's absolute path."""
+    p, b = Path(path).resolve(), Path(base if base is not None else Path.cwd()).resolve()
+    return str(p.relative_to(b)) if p.is_relative_to(b) else str(p)
+
+
 def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
     """The entry ``env_id`` of an rl-zoo style YAML file (a deep copy). A file that cannot
     be read, is not YAML or has no such mapping raises ValueError naming the file."""

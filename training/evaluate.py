@@ -91,6 +91,7 @@ from .common import (
     positive_int,
     score_mode,
     seed_list,
+    shown_path,
 )
 
 __all__ = ["ALL_POLICIES", "evaluate", "main"]
@@ -223,13 +224,6 @@ def _record_constant(args: tuple) -> Any:
         return record_constant(env, vbar, phi, seed, max_steps)
     finally:
         env.close()
-
-
-def _shown(path: str) -> str:
-    """``path`` relative to the working directory when under it (a results file then
-    names the repository's model, not one machine's absolute path)."""
-    p, cwd = Path(path).resolve(), Path.cwd().resolve()
-    return str(p.relative_to(cwd)) if p.is_relative_to(cwd) else str(p)
 
 
 def _mapped(pool: Any, fn: Any, jobs: list[dict[str, Any]], what: str) -> list[Any]:
@@ -760,7 +754,7 @@ def evaluate(
         # model's results are otherwise alike), and each trained policy's model file
         "env_kwargs": to_jsonable(env_kwargs),
         "max_episode_steps": max_steps,
-        "models": {p: "+".join(map(_shown, spec["models"]))
+        "models": {p: "+".join(map(shown_path, spec["models"]))
                    for p, spec in specs.items() if "models" in spec},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
