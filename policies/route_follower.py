@@ -62,7 +62,8 @@ line). Without the route it uses the window's mean. Then:
   its step edge and the run follows the flow again.
 
 Measured on routes drawn from the training families, never the held-out set
-(``python benchmarks/follower_study.py``, ``benchmarks/results/follower_study.jsonl``):
+(``python benchmarks/follower_study.py --config training/configs/ppo_residual.yml``,
+the script's default env then; ``benchmarks/results/follower_study.jsonl``):
 over 8 families x seeds 0-2 the mean score is 0.814 for the round-3 follower (no plan,
 the window's mean), 0.807 with the plan alone, 0.870 with the plan and the memory (the
 defaults); on 8 detour routes (seeds 0-7): 0.20, 0.50, 0.55. Routes without keep-outs
