@@ -721,7 +721,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     shipped residual agent, whose policies/pretrained/ppo_residual.yml is that stage's;
     sac_residual.yml (and its _sde twin) trains residual SAC on the calibrated surrogate,
     detour 2 in 9; ppo_residual_start_model.yml goes on training the shipped agent on the
-    model itself, on the first control steps of its episodes."""
+    model itself, on the first control steps of its episodes, and
+    ppo_residual_model_detour_finetune.yml on the model's detours."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -737,7 +738,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     expected = {"eval.yml": model, "ppo_residual_linear.yml": ("linear", 1.0),
                 "ppo_residual_linear033.yml": (MODEL["drag_law"], 0.33),
                 "ppo_residual_linear033_finetune.yml": (MODEL["drag_law"], 0.33),
-                "ppo_residual_start_model.yml": model}  # fmt: skip
+                "ppo_residual_start_model.yml": model,
+                "ppo_residual_model_detour_finetune.yml": model}  # fmt: skip
     # (detours, families) of each weighted twin; a curriculum twin's first draw, and its
     # last stage's (every family once: (1, len(FAMILIES)))
     once = (1, len(FAMILIES))
