@@ -43,7 +43,8 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     follower = RouteFollower.from_env(env)
     obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
     follower.reset(job["seed"])
-    oracle = RolloutOracle(env, follower, tuple(job["turns"]), tuple(job["speeds"]))
+    oracle = RolloutOracle(env, follower, tuple(job["turns"]), tuple(job["speeds"]),
+                           horizon=job.get("horizon"))  # fmt: skip
     t0 = time.perf_counter()
     steps = 0
     while True:
@@ -65,9 +66,20 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
         # the candidate played at each control step (0: the follower's own action, then
         # the turns, then the speeds: training.oracle.candidates)
         "choices": list(oracle.history),
-        "turns": job["turns"], "speeds": job["speeds"], "config": shown_path(job["config"], ROOT),
+        "turns": job["turns"], "speeds": job["speeds"], "horizon": job.get("horizon"),
+        "config": shown_path(job["config"], ROOT),
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip
+
+
+def _horizon(text: str) -> int:
+    try:
+        h = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if h < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {h}")
+    return h
 
 
 def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[dict[str, Any]]]:
@@ -91,16 +103,29 @@ def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[
         "--config", type=Path, default=EVAL_CONFIG,
         help="YAML whose env_kwargs set the env (default: the held-out evaluation's, the model)",
     )  # fmt: skip
+    ap.add_argument(
+        "--horizon", type=_horizon, default=None,
+        help="follower steps after each candidate, compared by the score reached there "
+        "(default: to the episode's end, the rollout algorithm)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--modes", type=name_list, default="oracle,follower",
+        help="episodes to play per route and seed: oracle, follower (the base alone)",
+    )  # fmt: skip
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
+    bad = sorted(set(args.modes) - {"oracle", "follower"})
+    if bad or not args.modes:
+        ap.error(f"--modes takes oracle and/or follower, got {','.join(args.modes)!r}")
 
-    common = {"turns": args.turns, "speeds": args.speeds, "config": str(args.config)}
+    common = {"turns": args.turns, "speeds": args.speeds, "config": str(args.config),
+              "horizon": args.horizon}  # fmt: skip
     jobs = [
         {"mode": mode, "target": t, "seed": s, **common}
         for s in args.seeds
         for t in args.targets
-        for mode in ("oracle", "follower")
+        for mode in args.modes
     ]
     return args, jobs
 
@@ -116,16 +141,18 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps(row), flush=True)
     print("| target | seed | follower | oracle | deviations / steps |")
     print("|---|---|---|---|---|")
-    pairs = {}
+    pairs: dict[tuple[str, int], dict[str, dict[str, Any]]] = {}
     for r in rows:
         pairs.setdefault((r["target"], r["seed"]), {})[r["mode"]] = r
     for (t, s), p in pairs.items():
-        o, f = p["oracle"], p["follower"]
-        print(f"| {t} | {s} | {f['score']:.3f} | {o['score']:.3f} | "
-              f"{o['deviations']} / {o['steps']} |")  # fmt: skip
-    mean = {m: sum(r["score"] for r in rows if r["mode"] == m) / (len(rows) / 2)
-            for m in ("follower", "oracle")}  # fmt: skip
-    print(f"mean: follower {mean['follower']:.3f}, oracle {mean['oracle']:.3f}")
+        o, f = p.get("oracle"), p.get("follower")
+        fs = f"{f['score']:.3f}" if f else "-"
+        os_ = f"{o['score']:.3f} | {o['deviations']} / {o['steps']}" if o else "- | -"
+        print(f"| {t} | {s} | {fs} | {os_} |")
+    for m in ("follower", "oracle"):
+        scores = [r["score"] for r in rows if r["mode"] == m]
+        if scores:
+            print(f"mean {m}: {sum(scores) / len(scores):.3f} over {len(scores)} episodes")
     return 0
 
 

@@ -76,6 +76,56 @@ def test_rollout_oracle_realises_its_prediction_and_never_loses_to_the_follower(
         env.close()
 
 
+def _play_oracle(
+    env: gymnasium.Env, horizon: int | None
+) -> tuple[list[int], list[float], list[float]]:
+    """One oracle episode: its choices, the score it predicted for each choice and the
+    score Φ realised after each step."""
+    follower = RouteFollower.from_env(env)
+    obs, info = env.reset(seed=3, options={"target": ROUTE})
+    follower.reset(3)
+    oracle = RolloutOracle(env, follower, turns=(0.4,), speeds=(0.5,), horizon=horizon)
+    predicted, realised = [], []
+    term = trunc = False
+    while not (term or trunc):
+        cands, scores, k = oracle.choose(obs, info)
+        predicted.append(scores[k])
+        obs, _, term, trunc, info = env.step(cands[k])
+        realised.append(float(info["score"]))
+    return oracle.history, predicted, realised
+
+
+def test_a_horizon_past_the_episode_end_is_the_rollout_algorithm() -> None:
+    """Truncated rollouts that reach the end are the full ones: the same choices and the
+    same predicted and realised scores, bit for bit."""
+    env = gymnasium.make("CNTDeposit-v0", score="corridor", max_episode_steps=4,
+                         drag_law="printed", delta_bar=1.0)  # fmt: skip
+    try:
+        full = _play_oracle(env, None)
+        assert _play_oracle(env, 4) == full
+    finally:
+        env.close()
+
+
+def test_horizon_zero_predicts_the_score_after_the_step_exactly() -> None:
+    """With horizon 0 a candidate's score is Φ after its one step: on the deterministic env
+    the chosen candidate's prediction is what the step realises, and it is the best of
+    the candidates tried."""
+    env = gymnasium.make("CNTDeposit-v0", score="corridor", max_episode_steps=4,
+                         drag_law="printed", delta_bar=1.0)  # fmt: skip
+    try:
+        history, predicted, realised = _play_oracle(env, 0)
+        assert predicted == realised and len(history) == 4
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("horizon", [-1, 1.5, True, "2"])
+def test_a_bad_horizon_is_refused(horizon: object) -> None:
+    with pytest.raises(ValueError, match="horizon"):
+        RolloutOracle(env=None, follower=None, horizon=horizon)  # type: ignore[arg-type]
+
+
 def _episode(obs: np.ndarray, follower: np.ndarray, cands: np.ndarray, scores: np.ndarray,
              chosen: np.ndarray, index: int) -> dict:  # fmt: skip
     summary = {"index": index, "difficulty": 0.2, "wall_s": 1.0}

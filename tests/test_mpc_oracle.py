@@ -7,6 +7,8 @@ pinned the fast surrogate since 2026-11-26, and measured the wrong model.
 
 from __future__ import annotations
 
+import pytest
+
 from benchmarks import mpc_oracle  # the repo root is on pytest's pythonpath
 from training.common import env_settings, load_config
 from training.evaluate import build_parser
@@ -39,3 +41,17 @@ def test_the_follower_study_plays_the_evaluation_env_by_default() -> None:
     study = follower_study.build_parser().parse_args([]).config
     evaluation = build_parser().parse_args([]).config
     assert env_settings(load_config(study)) == env_settings(load_config(evaluation))
+
+
+def test_the_oracle_takes_a_horizon_and_one_mode() -> None:
+    _, jobs = mpc_oracle.parse_jobs(["--targets", "u_turn", "--horizon", "3", "--modes", "oracle"])
+    assert [(j["mode"], j["horizon"]) for j in jobs] == [("oracle", 3)]
+    _, jobs = mpc_oracle.parse_jobs(["--targets", "u_turn"])
+    assert [(j["mode"], j["horizon"]) for j in jobs] == [("oracle", None), ("follower", None)]
+
+
+@pytest.mark.parametrize("argv", [["--horizon", "-1"], ["--horizon", "x"], ["--modes", "planner"]])
+def test_the_oracle_refuses_a_bad_horizon_or_mode(argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        mpc_oracle.parse_jobs(["--targets", "u_turn", *argv])
+    assert exc.value.code == 2

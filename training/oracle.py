@@ -14,6 +14,14 @@ It reads the simulator through the copies, so it is not a deployable policy: it 
 what flow schedules can reach (``benchmarks/mpc_oracle.py``) and labels the states a
 trained agent should act on (``training/distil.py``). Cost: (K - 1) x the remaining
 steps per control step, ~N^2 (K - 1) / 2 env steps per episode of N steps.
+
+``horizon`` [choice] truncates the rollouts: each candidate, the follower's own action
+included, is played for one step and the follower for ``horizon`` more (fewer at the
+episode's end), and the candidates are compared by the score Φ reached there (the
+potential, ``info["score"]``). It costs K (horizon + 1) env steps per control step,
+~N K (horizon + 1) per episode, linear in N; the improvement property is then lost (a
+short horizon can prefer a step whose cost comes later). None (default) rolls out to the
+episode's end.
 """
 
 from __future__ import annotations
@@ -45,11 +53,14 @@ def candidates(action: Any, vbar_max: float, turns=DEFAULT_TURNS,
     return [np.asarray(a, dtype=np.float32) for a in out]
 
 
-def finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dict) -> float:
-    """Play ``follower`` (any policy with ``act``) from here to the episode's end; the
-    final score."""
-    while not (term or trunc):
+def finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dict,
+           steps: int | None = None) -> float:  # fmt: skip
+    """Play ``follower`` (any policy with ``act``) from here for ``steps`` control steps,
+    or to the episode's end (None, or when it ends first); the score Φ reached."""
+    played = 0
+    while not (term or trunc) and (steps is None or played < steps):
         obs, _, term, trunc, info = env.step(follower.act(obs))
+        played += 1
     return float(info["score"])
 
 
@@ -66,9 +77,15 @@ class RolloutOracle:
     follower: Any
     turns: tuple[float, ...] = DEFAULT_TURNS
     speeds: tuple[float, ...] = DEFAULT_SPEEDS
+    horizon: int | None = None  # follower steps after a candidate; None: to the end
     base: float | None = None  # final score of following the follower from the state
     rollouts: int = 0
     history: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        h = self.horizon
+        if h is not None and (isinstance(h, bool) or not isinstance(h, int) or h < 0):
+            raise ValueError(f"horizon must be None or an int >= 0, got {h!r}")
 
     def choose(self, obs: Any, info: dict) -> tuple[list[np.ndarray], list[float], int]:
         # the copies hold the follower before this step's act(), so each rollout replays
@@ -76,6 +93,15 @@ class RolloutOracle:
         snapshot = copy.deepcopy((self.env, self.follower))
         a = self.follower.act(obs)
         cands = candidates(a, self.env.unwrapped.vbar_max, self.turns, self.speeds)
+        if self.horizon is not None:
+            scores = [self._truncated(snapshot, obs, cand) for cand in cands]
+            chosen = 0
+            for i, score in enumerate(scores):
+                if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
+                    chosen = i
+            self.history.append(chosen)
+            snapshot[0].close()
+            return cands, scores, chosen
         if self.base is None:
             e, f = copy.deepcopy(snapshot)
             self.base = finish(e, f, obs, False, False, info)
@@ -97,3 +123,13 @@ class RolloutOracle:
         self.history.append(chosen)
         snapshot[0].close()
         return cands, scores, chosen
+
+    def _truncated(self, snapshot: Any, obs: Any, cand: np.ndarray) -> float:
+        """Φ after ``cand`` and ``horizon`` follower steps, on a copy of ``snapshot``."""
+        e, f = copy.deepcopy(snapshot)
+        f.act(obs)  # the follower's memory as the real one's after this step's act
+        o, _, term, trunc, inf = e.step(cand)
+        score = finish(e, f, o, term, trunc, inf, self.horizon)
+        self.rollouts += 1
+        e.close()
+        return score
