@@ -197,3 +197,29 @@ def test_run_until_yields_what_finishes_and_abandons_the_rest_at_the_deadline() 
     assert time.perf_counter() - t0 < 300.0  # the long task was terminated, not awaited
     with pytest.raises(ValueError, match="negative nap"):
         list(distil.run_until(_nap, [-1.0], 1, time.perf_counter() + 60.0))
+
+
+def test_a_label_directory_holds_one_horizon(tmp_path: Path) -> None:
+    """Labels of two horizons are never mixed: a resume with another --horizon is refused
+    before any episode runs, and so is one over labels made before the option (full
+    rollouts) or over an unreadable record."""
+    deadline = 0.0  # nothing is labelled: only the check runs
+    assert distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5) == []
+    assert json.loads((tmp_path / "labels/oracle.json").read_text()) == {"horizon": 5}
+    assert distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5) == []
+    with pytest.raises(SystemExit, match="horizon 5, not None"):
+        distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline)
+    old = tmp_path / "old"
+    (old / "labels").mkdir(parents=True)
+    (old / "labels/ep_0.npz").write_bytes(b"")
+    with pytest.raises(SystemExit, match="horizon None, not 5"):
+        distil.label(old, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5)
+    (tmp_path / "labels/oracle.json").write_text("{")
+    with pytest.raises(SystemExit, match="unreadable"):
+        distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5)
+
+
+def test_distil_refuses_a_negative_horizon(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        distil.main(["--horizon", "-1", "--out", "unused"])
+    assert exc.value.code == 2 and "--horizon must be >= 0" in capsys.readouterr().err
