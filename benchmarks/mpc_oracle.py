@@ -27,7 +27,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from cnt_env.cli.common import float_list, name_list, seed_list  # noqa: E402
+from cnt_env.cli.common import float_list, name_list, nonnegative_int, seed_list  # noqa: E402
 
 OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
 
@@ -72,16 +72,6 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _horizon(text: str) -> int:
-    try:
-        h = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if h < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {h}")
-    return h
-
-
 def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[dict[str, Any]]]:
     """The command line and the episodes it asks for: per seed and route, the oracle's
     and the follower's."""
@@ -104,7 +94,7 @@ def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[
         help="YAML whose env_kwargs set the env (default: the held-out evaluation's, the model)",
     )  # fmt: skip
     ap.add_argument(
-        "--horizon", type=_horizon, default=None,
+        "--horizon", type=nonnegative_int, default=None,
         help="follower steps after each candidate, compared by the score reached there "
         "(default: to the episode's end, the rollout algorithm)",
     )  # fmt: skip

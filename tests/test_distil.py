@@ -222,4 +222,4 @@ def test_a_label_directory_holds_one_horizon(tmp_path: Path) -> None:
 def test_distil_refuses_a_negative_horizon(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         distil.main(["--horizon", "-1", "--out", "unused"])
-    assert exc.value.code == 2 and "--horizon must be >= 0" in capsys.readouterr().err
+    assert exc.value.code == 2 and "argument --horizon: must be >= 0" in capsys.readouterr().err

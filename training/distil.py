@@ -311,6 +311,8 @@ def validate(model_path: Path, n_routes: int = 4) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from cnt_env.cli.common import nonnegative_int
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs/distil"))
     ap.add_argument("--episodes", type=int, default=40)
@@ -344,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--horizon",
-        type=int,
+        type=nonnegative_int,
         default=None,
         metavar="H",
         help="truncated oracle: score candidates H follower steps on (default: to the end)",
@@ -370,8 +372,6 @@ def main(argv: list[str] | None = None) -> int:
     from .common import parse_cli
 
     args = parse_cli(ap, argv)
-    if args.horizon is not None and args.horizon < 0:
-        ap.error(f"--horizon must be >= 0, got {args.horizon}")
     t0 = time.perf_counter()
     if not args.fit_only:
         families = [f for f in args.families.split(",") if f]
