@@ -44,7 +44,8 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     obs, info = env.reset(seed=job["seed"], options={"target": job["target"]})
     follower.reset(job["seed"])
     oracle = RolloutOracle(env, follower, tuple(job["turns"]), tuple(job["speeds"]),
-                           horizon=job.get("horizon"))  # fmt: skip
+                           horizon=job.get("horizon"),
+                           confirm=bool(job.get("confirm", False)))  # fmt: skip
     t0 = time.perf_counter()
     steps = 0
     while True:
@@ -67,6 +68,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
         # the turns, then the speeds: training.oracle.candidates)
         "choices": list(oracle.history),
         "turns": job["turns"], "speeds": job["speeds"], "horizon": job.get("horizon"),
+        "confirm": bool(job.get("confirm", False)),
         "config": shown_path(job["config"], ROOT),
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip
@@ -99,18 +101,25 @@ def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[
         "(default: to the episode's end, the rollout algorithm)",
     )  # fmt: skip
     ap.add_argument(
+        "--confirm", action="store_true",
+        help="with --horizon: play a screened departure only if its full rollout wins "
+        "(training.oracle.RolloutOracle.confirm)",
+    )  # fmt: skip
+    ap.add_argument(
         "--modes", type=name_list, default="oracle,follower",
         help="episodes to play per route and seed: oracle, follower (the base alone)",
     )  # fmt: skip
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
+    if args.confirm and args.horizon is None:
+        ap.error("--confirm needs --horizon (without one every rollout is full)")
     bad = sorted(set(args.modes) - {"oracle", "follower"})
     if bad or not args.modes:
         ap.error(f"--modes takes oracle and/or follower, got {','.join(args.modes)!r}")
 
     common = {"turns": args.turns, "speeds": args.speeds, "config": str(args.config),
-              "horizon": args.horizon}  # fmt: skip
+              "horizon": args.horizon, "confirm": args.confirm}  # fmt: skip
     jobs = [
         {"mode": mode, "target": t, "seed": s, **common}
         for s in args.seeds

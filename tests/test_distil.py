@@ -5,6 +5,7 @@ imitation targets, and a fitted agent that loads as a residual policy."""
 
 from __future__ import annotations
 
+import copy
 import itertools
 import json
 import math
@@ -120,6 +121,56 @@ def test_horizon_zero_predicts_the_score_after_the_step_exactly() -> None:
         env.close()
 
 
+def test_a_confirmed_screen_never_loses_to_the_follower_and_predicts_exactly() -> None:
+    """``confirm``: a horizon-0 screen departs from the follower freely, and a departure
+    is played only where its full rollout wins, so the final score is never below the
+    follower's, each played departure's full rollout is what the episode realises, and
+    the scores not rolled out to the end are NaN."""
+    env = gymnasium.make("CNTDeposit-v0", score="corridor", max_episode_steps=5,
+                         drag_law="printed", delta_bar=1.0)  # fmt: skip
+    try:
+        follower = RouteFollower.from_env(env)
+        obs, info = env.reset(seed=3, options={"target": ROUTE})
+        follower.reset(3)
+        term = trunc = False
+        while not (term or trunc):
+            obs, _, term, trunc, info = env.step(follower.act(obs))
+        follower_score = float(info["score"])
+
+        obs, info = env.reset(seed=3, options={"target": ROUTE})
+        follower.reset(3)
+        oracle = RolloutOracle(env, follower, turns=(-0.4, 0.4), speeds=(0.5,), horizon=0,
+                               confirm=True)  # fmt: skip
+        screen = RolloutOracle(copy.deepcopy(env), copy.deepcopy(follower),
+                               turns=(-0.4, 0.4), speeds=(0.5,), horizon=0)  # fmt: skip
+        predicted, screened, bases = [], [], []
+        term = trunc = False
+        while not (term or trunc):
+            screen.env, screen.follower = copy.deepcopy((env, follower))
+            screened.append(screen.choose(obs, info)[2])
+            cands, scores, k = oracle.choose(obs, info)
+            assert not math.isnan(scores[0]) and not math.isnan(scores[k])
+            assert k in (0, screened[-1])
+            assert all(math.isnan(s) for i, s in enumerate(scores) if i not in (0, screened[-1]))
+            predicted.append(scores[k])
+            bases.append(scores[0])
+            obs, _, term, trunc, info = env.step(cands[k])
+        assert bases[0] == follower_score  # the first base rollout is the follower's episode
+        assert all(b >= a for a, b in itertools.pairwise(predicted))
+        assert float(info["score"]) == predicted[-1] >= follower_score
+        assert any(k > 0 for k in screened)  # the screen did depart: the check is not idle
+    finally:
+        env.close()
+
+
+def test_confirm_needs_a_horizon(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ValueError, match="confirm needs a horizon"):
+        RolloutOracle(env=None, follower=None, confirm=True)  # type: ignore[arg-type]
+    with pytest.raises(SystemExit) as exc:
+        distil.main(["--confirm", "--out", "unused"])
+    assert exc.value.code == 2 and "--confirm needs --horizon" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("horizon", [-1, 1.5, True, "2"])
 def test_a_bad_horizon_is_refused(horizon: object) -> None:
     with pytest.raises(ValueError, match="horizon"):
@@ -199,24 +250,31 @@ def test_run_until_yields_what_finishes_and_abandons_the_rest_at_the_deadline() 
         list(distil.run_until(_nap, [-1.0], 1, time.perf_counter() + 60.0))
 
 
-def test_a_label_directory_holds_one_horizon(tmp_path: Path) -> None:
-    """Labels of two horizons are never mixed: a resume with another --horizon is refused
-    before any episode runs, and so is one over labels made before the option (full
-    rollouts) or over an unreadable record."""
+def test_a_label_directory_holds_one_oracle(tmp_path: Path) -> None:
+    """Labels of two oracles are never mixed: a resume with another --horizon or
+    --confirm is refused before any episode runs, and so is one over labels made before
+    the options (full rollouts) or over an unreadable record."""
     deadline = 0.0  # nothing is labelled: only the check runs
     assert distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5) == []
-    assert json.loads((tmp_path / "labels/oracle.json").read_text()) == {"horizon": 5}
+    record = json.loads((tmp_path / "labels/oracle.json").read_text())
+    assert record == {"horizon": 5, "confirm": False}
     assert distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5) == []
-    with pytest.raises(SystemExit, match="horizon 5, not None"):
+    with pytest.raises(SystemExit, match="horizon 5 and confirm False, not horizon None"):
         distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline)
+    with pytest.raises(SystemExit, match="not horizon 5 and confirm True"):
+        distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5, confirm=True)
+    # a record written before --confirm existed is read as confirm False
+    (tmp_path / "labels/oracle.json").write_text(json.dumps({"horizon": 5}))
+    assert distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5) == []
     old = tmp_path / "old"
     (old / "labels").mkdir(parents=True)
     (old / "labels/ep_0.npz").write_bytes(b"")
-    with pytest.raises(SystemExit, match="horizon None, not 5"):
+    with pytest.raises(SystemExit, match="horizon None and confirm False, not horizon 5"):
         distil.label(old, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5)
-    (tmp_path / "labels/oracle.json").write_text("{")
-    with pytest.raises(SystemExit, match="unreadable"):
-        distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5)
+    for bad in ("{", "[5]"):
+        (tmp_path / "labels/oracle.json").write_text(bad)
+        with pytest.raises(SystemExit, match="unreadable"):
+            distil.label(tmp_path, 0, 0, [0.2], ["straight"], 1, deadline, horizon=5)
 
 
 def test_distil_refuses_a_negative_horizon(capsys: pytest.CaptureFixture[str]) -> None:

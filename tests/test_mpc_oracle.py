@@ -48,9 +48,14 @@ def test_the_oracle_takes_a_horizon_and_one_mode() -> None:
     assert [(j["mode"], j["horizon"]) for j in jobs] == [("oracle", 3)]
     _, jobs = mpc_oracle.parse_jobs(["--targets", "u_turn"])
     assert [(j["mode"], j["horizon"]) for j in jobs] == [("oracle", None), ("follower", None)]
+    assert not any(j["confirm"] for j in jobs)
+    _, jobs = mpc_oracle.parse_jobs(["--targets", "u_turn", "--horizon", "5", "--confirm"])
+    assert all(j["confirm"] and j["horizon"] == 5 for j in jobs)
 
 
-@pytest.mark.parametrize("argv", [["--horizon", "-1"], ["--horizon", "x"], ["--modes", "planner"]])
+@pytest.mark.parametrize(
+    "argv", [["--horizon", "-1"], ["--horizon", "x"], ["--modes", "planner"], ["--confirm"]]
+)
 def test_the_oracle_refuses_a_bad_horizon_or_mode(argv: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         mpc_oracle.parse_jobs(["--targets", "u_turn", *argv])

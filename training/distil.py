@@ -9,8 +9,10 @@ algorithm (``training/oracle.py``) on routes drawn from the training families.
    iteration of DAgger, Ross et al. 2011). Resumable: a finished episode is not re-run.
    ``--horizon H`` labels with the truncated oracle (``RolloutOracle.horizon``: each
    candidate scored by Φ after H follower steps; linear in the episode's length, so the
-   detour family can be labelled too); one label directory holds one horizon
-   (``labels/oracle.json``).
+   detour family can be labelled too); ``--confirm`` plays a screened departure only
+   where its full rollout beats the follower's (``RolloutOracle.confirm``: sparse labels
+   that keep the improvement property); one label directory holds one oracle
+   (``labels/oracle.json``: its horizon and confirm).
 2. **Fit.** A PPO MlpPolicy of the residual config (``configs/ppo_residual.yml``, at
    ``--scale``) regresses its mean action onto the oracle's correction of the follower,
    ``clip((a_oracle - a_follower) / scale, -1, 1)``, where the chosen candidate beats the
@@ -75,7 +77,8 @@ def label_episode(job: dict[str, Any]) -> dict[str, Any]:
     family = families[job["index"] % len(families)]
     obs, info = env.reset(seed=job["seed"], options={"target": family})
     follower.reset(job["seed"])
-    oracle = RolloutOracle(env, follower, horizon=job.get("horizon"))
+    oracle = RolloutOracle(env, follower, horizon=job.get("horizon"),
+                           confirm=bool(job.get("confirm", False)))  # fmt: skip
     t0 = time.perf_counter()
     rows: dict[str, list] = {"obs": [], "follower": [], "candidates": [], "scores": [],
                              "chosen": []}  # fmt: skip
@@ -90,10 +93,10 @@ def label_episode(job: dict[str, Any]) -> dict[str, Any]:
     summary = {"index": job["index"], "seed": job["seed"], "family": family,
                "difficulty": job["difficulty"], "steps": len(rows["chosen"]),
                "deviations": int(sum(int(c) > 0 for c in rows["chosen"])),
-               "horizon": oracle.horizon,
+               "horizon": oracle.horizon, "confirm": oracle.confirm,
                # the first base rollout: the follower's final score, unless truncated
-               "follower_score": (float(rows["scores"][0][0]) if oracle.horizon is None
-                                  else None),
+               "follower_score": (float(rows["scores"][0][0])
+                                  if oracle.horizon is None or oracle.confirm else None),
                "oracle_score": float(info["score"]),
                "rollouts": oracle.rollouts,
                "wall_s": round(time.perf_counter() - t0, 1)}  # fmt: skip
@@ -107,27 +110,31 @@ def label_episode(job: dict[str, Any]) -> dict[str, Any]:
 
 def label(out: Path, episodes: int, seed0: int, difficulty: list[float], families: list[str],
           jobs: int, deadline: float,
-          horizon: int | None = None) -> list[dict[str, Any]]:  # fmt: skip
+          horizon: int | None = None, confirm: bool = False) -> list[dict[str, Any]]:  # fmt: skip
     """Run the missing episodes of ``out/labels`` until ``deadline`` (perf_counter);
     episodes still running at the deadline are abandoned (not written). Refuses a
-    directory labelled with another ``horizon``."""
+    directory labelled with another oracle (``horizon``, ``confirm``)."""
     labels = out / "labels"
     labels.mkdir(parents=True, exist_ok=True)
     meta = labels / "oracle.json"
-    had: int | None = None  # a directory labelled before the option: full rollouts
+    want = {"horizon": horizon, "confirm": bool(confirm)}
+    had: dict[str, Any] = {"horizon": None, "confirm": False}  # labelled before the options
     if meta.is_file():
         try:
-            had = json.loads(meta.read_text())["horizon"]
-        except (ValueError, KeyError, TypeError) as exc:
+            stored = json.loads(meta.read_text())
+            had = {"horizon": stored["horizon"], "confirm": bool(stored.get("confirm", False))}
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise SystemExit(f"{meta} is unreadable ({exc}); delete it only if every "
-                             f"label in {labels} has horizon {horizon}") from exc  # fmt: skip
+                             f"label in {labels} has {want}") from exc  # fmt: skip
     elif not any(labels.glob("ep_*.npz")):
-        had = horizon
-    if had != horizon:
-        raise SystemExit(f"{labels} was labelled with horizon {had}, not {horizon}: "
-                         "resume with that --horizon or use another --out")  # fmt: skip
-    meta.write_text(json.dumps({"horizon": horizon}))
+        had = want
+    if had != want:
+        raise SystemExit(f"{labels} was labelled with horizon {had['horizon']} and confirm "
+                         f"{had['confirm']}, not horizon {horizon} and confirm {confirm}: "
+                         "resume with those options or use another --out")  # fmt: skip
+    meta.write_text(json.dumps(want))
     todo = [{"index": i, "seed": seed0 + i, "families": families, "horizon": horizon,
+             "confirm": bool(confirm),
              "difficulty": difficulty[(i // len(families)) % len(difficulty)],
              "path": str(labels / f"ep_{i}.npz")}
             for i in range(episodes) if not (labels / f"ep_{i}.npz").is_file()]  # fmt: skip
@@ -351,6 +358,11 @@ def main(argv: list[str] | None = None) -> int:
         metavar="H",
         help="truncated oracle: score candidates H follower steps on (default: to the end)",
     )
+    ap.add_argument(
+        "--confirm",
+        action="store_true",
+        help="with --horizon: play a screened departure only if its full rollout wins",
+    )
     ap.add_argument("--epochs", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--fit-only", action="store_true")
@@ -372,12 +384,14 @@ def main(argv: list[str] | None = None) -> int:
     from .common import parse_cli
 
     args = parse_cli(ap, argv)
+    if args.confirm and args.horizon is None:
+        ap.error("--confirm needs --horizon (without one every rollout is full)")
     t0 = time.perf_counter()
     if not args.fit_only:
         families = [f for f in args.families.split(",") if f]
         difficulty = [float(d) for d in args.difficulty.split(",") if d]
         label(args.out, args.episodes, args.seed0, difficulty, families, args.jobs,
-              t0 + args.max_wall_seconds, args.horizon)  # fmt: skip
+              t0 + args.max_wall_seconds, args.horizon, args.confirm)  # fmt: skip
     models = args.model_dir or args.out / "model"
     report = fit(
         args.out, args.scale, args.margin, args.epochs, args.seed, models, args.fit_episodes

@@ -22,11 +22,21 @@ potential, ``info["score"]``). It costs K (horizon + 1) env steps per control st
 ~N K (horizon + 1) per episode, linear in N; the improvement property is then lost (a
 short horizon can prefer a step whose cost comes later). None (default) rolls out to the
 episode's end.
+
+``confirm`` [choice, with a horizon] makes the truncated rollouts a screen: their best
+candidate, when it is not the follower's own action, is rolled out to the episode's end
+and played only if that final score beats the follower's (carried from the step before,
+as without a horizon); otherwise the follower's action is played. The improvement
+property is back (the final score is never below the follower's), at one full rollout
+per screened departure instead of K - 1 per step. The returned scores are then the
+final scores where a rollout reached the end (index 0 and a screened candidate), NaN
+elsewhere.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -78,6 +88,7 @@ class RolloutOracle:
     turns: tuple[float, ...] = DEFAULT_TURNS
     speeds: tuple[float, ...] = DEFAULT_SPEEDS
     horizon: int | None = None  # follower steps after a candidate; None: to the end
+    confirm: bool = False  # with a horizon: play a screened departure only if it wins
     base: float | None = None  # final score of following the follower from the state
     rollouts: int = 0
     history: list[int] = field(default_factory=list)
@@ -86,6 +97,8 @@ class RolloutOracle:
         h = self.horizon
         if h is not None and (isinstance(h, bool) or not isinstance(h, int) or h < 0):
             raise ValueError(f"horizon must be None or an int >= 0, got {h!r}")
+        if self.confirm and h is None:
+            raise ValueError("confirm needs a horizon: without one every rollout is full")
 
     def choose(self, obs: Any, info: dict) -> tuple[list[np.ndarray], list[float], int]:
         # the copies hold the follower before this step's act(), so each rollout replays
@@ -94,28 +107,20 @@ class RolloutOracle:
         a = self.follower.act(obs)
         cands = candidates(a, self.env.unwrapped.vbar_max, self.turns, self.speeds)
         if self.horizon is not None:
-            scores = [self._truncated(snapshot, obs, cand) for cand in cands]
+            scores = [self._rollout(snapshot, obs, c, self.horizon) for c in cands]
             chosen = 0
             for i, score in enumerate(scores):
                 if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
                     chosen = i
+            if self.confirm:
+                scores, chosen = self._confirmed(snapshot, obs, info, cands, chosen)
             self.history.append(chosen)
             snapshot[0].close()
             return cands, scores, chosen
-        if self.base is None:
-            e, f = copy.deepcopy(snapshot)
-            self.base = finish(e, f, obs, False, False, info)
-            self.rollouts += 1
-            e.close()
-        scores = [self.base]
+        scores = [self._base(snapshot, obs, info)]
         chosen = 0
         for cand in cands[1:]:
-            e, f = copy.deepcopy(snapshot)
-            f.act(obs)  # the follower's memory as the real one's after this step's act
-            o, _, term, trunc, inf = e.step(cand)
-            score = finish(e, f, o, term, trunc, inf)
-            self.rollouts += 1
-            e.close()
+            score = self._rollout(snapshot, obs, cand)
             scores.append(score)
             if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
                 chosen = len(scores) - 1
@@ -124,12 +129,37 @@ class RolloutOracle:
         snapshot[0].close()
         return cands, scores, chosen
 
-    def _truncated(self, snapshot: Any, obs: Any, cand: np.ndarray) -> float:
-        """Φ after ``cand`` and ``horizon`` follower steps, on a copy of ``snapshot``."""
+    def _base(self, snapshot: Any, obs: Any, info: dict) -> float:
+        """The final score of following the follower from here: carried from the step
+        before (the continuation of the candidate played there), else rolled out."""
+        if self.base is None:
+            e, f = copy.deepcopy(snapshot)
+            self.base = finish(e, f, obs, False, False, info)
+            self.rollouts += 1
+            e.close()
+        return self.base
+
+    def _rollout(self, snapshot: Any, obs: Any, cand: np.ndarray,
+                 steps: int | None = None) -> float:  # fmt: skip
+        """Φ after ``cand`` and ``steps`` follower steps (None: to the end), on a copy of
+        ``snapshot``."""
         e, f = copy.deepcopy(snapshot)
         f.act(obs)  # the follower's memory as the real one's after this step's act
         o, _, term, trunc, inf = e.step(cand)
-        score = finish(e, f, o, term, trunc, inf, self.horizon)
+        score = finish(e, f, o, term, trunc, inf, steps)
         self.rollouts += 1
         e.close()
         return score
+
+    def _confirmed(self, snapshot: Any, obs: Any, info: dict, cands: list[np.ndarray],
+                   screened: int) -> tuple[list[float], int]:  # fmt: skip
+        """``confirm``: the full rollout of the screen's pick against the follower's."""
+        scores = [math.nan] * len(cands)
+        scores[0] = self._base(snapshot, obs, info)
+        if screened == 0:
+            return scores, 0
+        scores[screened] = self._rollout(snapshot, obs, cands[screened])
+        if scores[screened] > scores[0] + 1e-12:  # the follower's own action wins ties
+            self.base = scores[screened]
+            return scores, screened
+        return scores, 0
