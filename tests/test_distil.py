@@ -45,17 +45,21 @@ def _short_env() -> gymnasium.Env:
     return gymnasium.make("CNTDeposit-v0", score="corridor", max_episode_steps=5)
 
 
+def _follower_score(env: gymnasium.Env, follower: RouteFollower) -> float:
+    """The final score of the follower's own episode on ROUTE at reset seed 3."""
+    obs, info = env.reset(seed=3, options={"target": ROUTE})
+    follower.reset(3)
+    term = trunc = False
+    while not (term or trunc):
+        obs, _, term, trunc, info = env.step(follower.act(obs))
+    return float(info["score"])
+
+
 def test_rollout_oracle_realises_its_prediction_and_never_loses_to_the_follower() -> None:
     env = _short_env()
     try:
         follower = RouteFollower.from_env(env)
-        obs, info = env.reset(seed=3, options={"target": ROUTE})
-        follower.reset(3)
-        term = trunc = False
-        while not (term or trunc):
-            obs, _, term, trunc, info = env.step(follower.act(obs))
-        follower_score = float(info["score"])
-
+        follower_score = _follower_score(env, follower)
         obs, info = env.reset(seed=3, options={"target": ROUTE})
         follower.reset(3)
         oracle = RolloutOracle(env, follower, turns=(0.4,), speeds=())
@@ -130,13 +134,7 @@ def test_a_confirmed_screen_never_loses_to_the_follower_and_predicts_exactly() -
                          drag_law="printed", delta_bar=1.0)  # fmt: skip
     try:
         follower = RouteFollower.from_env(env)
-        obs, info = env.reset(seed=3, options={"target": ROUTE})
-        follower.reset(3)
-        term = trunc = False
-        while not (term or trunc):
-            obs, _, term, trunc, info = env.step(follower.act(obs))
-        follower_score = float(info["score"])
-
+        follower_score = _follower_score(env, follower)
         obs, info = env.reset(seed=3, options={"target": ROUTE})
         follower.reset(3)
         oracle = RolloutOracle(env, follower, turns=(-0.4, 0.4), speeds=(0.5,), horizon=0,
