@@ -4,8 +4,8 @@ follower? The classifier AUC of "depart or follow" on held-out label episodes (i
 ``cnt-distil`` fits a residual to the oracle's corrections; when its label error barely
 beats predicting no correction, either the corrections are not a function of what the
 agent observes, or there are too few labels to learn that function. This separates the
-two: on the label episodes of a ``cnt-distil`` directory (the fit's split: episodes
-``index % 5 == 4`` held out), a logistic regression and a 64x64 tanh MLP, trained with
+two: on the label episodes of a ``cnt-distil`` directory (the fit's split,
+``training.distil.held_out``), a logistic regression and a 64x64 tanh MLP, trained with
 class weights on the observation (standardised by the training states' statistics),
 score each held-out state; the AUC (the probability that a departure outranks a follow)
 is reported at fixed epochs (no choice on the held-out states) and as the best of the
@@ -97,11 +97,11 @@ def classifier_aucs(xt: np.ndarray, yt: np.ndarray, xv: np.ndarray, yv: np.ndarr
 def study(labels: Path, limits: list[int | None]) -> dict[str, Any]:
     import torch
 
-    from training.distil import load_labels
+    from training.distil import held_out, load_labels
 
     torch.set_num_threads(1)
     eps = load_labels(labels)
-    valid = [e for e in eps if e["summary"]["index"] % 5 == 4]
+    valid = [e for e in eps if held_out(e)]
     xv, yv, tv = arrays(valid)
     report: dict[str, Any] = {
         "labels": str(labels), "episodes": len(eps), "valid_states": len(yv),
@@ -110,7 +110,7 @@ def study(labels: Path, limits: list[int | None]) -> dict[str, Any]:
         "step_index_auc": round(auc(-tv.astype(float), yv), 3), "curve": [],
     }  # fmt: skip
     for limit in limits:
-        train = [e for e in eps if e["summary"]["index"] % 5 != 4
+        train = [e for e in eps if not held_out(e)
                  and (limit is None or e["summary"]["index"] < limit)]  # fmt: skip
         xt, yt, _ = arrays(train)
         mu, sd = xt.mean(axis=0), xt.std(axis=0) + 1e-6

@@ -68,7 +68,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
         # the turns, then the speeds: training.oracle.candidates)
         "choices": list(oracle.history),
         "turns": job["turns"], "speeds": job["speeds"], "horizon": job.get("horizon"),
-        "confirm": bool(job.get("confirm", False)),
+        "confirm": oracle.confirm,
         "config": shown_path(job["config"], ROOT),
         "wall_s": round(time.perf_counter() - t0, 1),
     }  # fmt: skip

@@ -181,6 +181,11 @@ def load_labels(out: Path) -> list[dict[str, np.ndarray]]:
     return eps
 
 
+def held_out(ep: dict[str, Any]) -> bool:
+    """Whether label episode ``ep`` is one the fit holds out (index mod 5 == 4)."""
+    return ep["summary"]["index"] % 5 == 4
+
+
 def targets(ep: dict[str, np.ndarray], scale: float, margin: float) -> np.ndarray:
     """The residual the agent should output at each step of ``ep`` (module doc)."""
     k = ep["chosen"].astype(int)
@@ -213,8 +218,8 @@ def fit(out: Path, scale: float, margin: float, epochs: int, seed: int, models: 
     config = load_config(CONFIG)
     difficulty = max(e["summary"]["difficulty"] for e in eps)
     env_kwargs, max_steps = _env_kwargs(difficulty)
-    train = [e for e in eps if e["summary"]["index"] % 5 != 4] or eps
-    valid = [e for e in eps if e["summary"]["index"] % 5 == 4]
+    train = [e for e in eps if not held_out(e)] or eps
+    valid = [e for e in eps if held_out(e)]
     x = np.concatenate([e["obs"] for e in train]).astype(np.float64)
     y = np.concatenate([targets(e, scale, margin) for e in train])
 

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DEFAULT_SPEEDS", "DEFAULT_TURNS", "RolloutOracle", "candidates", "finish"]
+__all__ = ["DEFAULT_SPEEDS", "DEFAULT_TURNS", "RolloutOracle", "best", "candidates", "finish"]
 
 #: The candidate turns (rad) and speed fractions of the measured oracle
 #: (benchmarks/results/mpc_oracle.jsonl).
@@ -72,6 +72,16 @@ def finish(env: Any, follower: Any, obs: Any, term: bool, trunc: bool, info: dic
         obs, _, term, trunc, info = env.step(follower.act(obs))
         played += 1
     return float(info["score"])
+
+
+def best(scores: list[float]) -> int:
+    """The index of the highest score; the first (the follower's own action) wins ties
+    within 1e-12, and so does any earlier candidate over a later one."""
+    chosen = 0
+    for i, score in enumerate(scores):
+        if score > scores[chosen] + 1e-12:
+            chosen = i
+    return chosen
 
 
 @dataclass
@@ -108,22 +118,15 @@ class RolloutOracle:
         cands = candidates(a, self.env.unwrapped.vbar_max, self.turns, self.speeds)
         if self.horizon is not None:
             scores = [self._rollout(snapshot, obs, c, self.horizon) for c in cands]
-            chosen = 0
-            for i, score in enumerate(scores):
-                if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
-                    chosen = i
+            chosen = best(scores)
             if self.confirm:
                 scores, chosen = self._confirmed(snapshot, obs, info, cands, chosen)
             self.history.append(chosen)
             snapshot[0].close()
             return cands, scores, chosen
         scores = [self._base(snapshot, obs, info)]
-        chosen = 0
-        for cand in cands[1:]:
-            score = self._rollout(snapshot, obs, cand)
-            scores.append(score)
-            if score > scores[chosen] + 1e-12:  # the follower's own action wins ties
-                chosen = len(scores) - 1
+        scores += [self._rollout(snapshot, obs, cand) for cand in cands[1:]]
+        chosen = best(scores)
         self.base = scores[chosen]
         self.history.append(chosen)
         snapshot[0].close()
@@ -159,7 +162,7 @@ class RolloutOracle:
         if screened == 0:
             return scores, 0
         scores[screened] = self._rollout(snapshot, obs, cands[screened])
-        if scores[screened] > scores[0] + 1e-12:  # the follower's own action wins ties
+        if best([scores[0], scores[screened]]):
             self.base = scores[screened]
             return scores, screened
         return scores, 0
