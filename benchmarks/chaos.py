@@ -25,7 +25,8 @@ chaotic outcomes of the rollouts (the gain falls to the follower's spread).
         --oracle-rows benchmarks/results/mpc_oracle_detour/detour_block_model.jsonl
 
 writes one JSON line per episode to ``benchmarks/results/chaos/chaos.jsonl`` and prints
-per route and mode the unperturbed score and the perturbed mean, std, min and max.
+per route and mode the unperturbed score and the perturbed mean, std, min and max
+(``--summarize``: the table of the episodes already in ``--out``, running nothing).
 """
 
 from __future__ import annotations
@@ -137,8 +138,14 @@ def parse_jobs(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[
     )  # fmt: skip
     ap.add_argument("--config", type=Path, default=EVAL_CONFIG)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--out", type=Path, default=OUT, help="JSONL, appended (one ε per file)")
+    ap.add_argument(
+        "--summarize", action="store_true",
+        help="run nothing: print the table of every episode already in --out",
+    )  # fmt: skip
     args = ap.parse_args(argv)
+    if args.summarize:
+        return args, []
     bad = sorted(set(args.modes) - set(MODES))
     if bad:
         ap.error(f"--modes takes {', '.join(MODES)}; got {','.join(bad)}")
@@ -186,6 +193,13 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     args, jobs = parse_jobs(argv)
+    if args.summarize:
+        if not args.out.is_file():
+            print(f"chaos.py: no episodes in {args.out}", file=sys.stderr)
+            return 2
+        rows = [json.loads(line) for line in args.out.read_text().splitlines() if line]
+        print("\n".join(summary(rows)))
+        return 0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:

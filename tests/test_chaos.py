@@ -82,3 +82,13 @@ def test_summary_separates_the_unperturbed_episode() -> None:
             for k, s in enumerate([0.9, 0.8, 1.0])]  # fmt: skip
     table = chaos.summary(rows)
     assert table[-1] == "| u_turn | 0 | follower | 0.900 | 0.900 ± 0.141 | 0.800 | 1.000 | 2 |"
+
+
+def test_summarize_reads_the_episodes_already_written(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "chaos.jsonl"
+    rows = [{"target": "l_up", "seed": 1, "mode": "agent", "k": k, "score": s}
+            for k, s in enumerate([0.5, 0.6, 0.7])]  # fmt: skip
+    out.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert chaos.main(["--summarize", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.splitlines() == chaos.summary(rows)
+    assert chaos.main(["--summarize", "--out", str(tmp_path / "none.jsonl")]) == 2
