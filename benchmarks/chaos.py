@@ -41,8 +41,6 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import name_list, nonnegative_int, seed_list  # noqa: E402
@@ -57,20 +55,11 @@ def perturbation(k: int, eps: float) -> float:
     return 0.0 if k == 0 else (1 if k % 2 else -1) * eps * ((k + 1) // 2)
 
 
-def turned(action: np.ndarray, angle: float, vbar_max: float) -> np.ndarray:
-    """``action`` with its flow turned by ``angle`` (rad), speed kept."""
-    from cnt_env.task.spaces import action_from_flow, flow_from_action
-
-    if angle == 0.0:
-        return np.asarray(action, dtype=np.float32)
-    vbar, phi = flow_from_action(np.asarray(action, dtype=float), vbar_max)
-    return np.asarray(action_from_flow(vbar, phi + angle, vbar_max), dtype=np.float32)
-
-
 def episode(job: dict[str, Any]) -> dict[str, Any]:
     """One episode of ``job["mode"]`` with the flow of step ``job["at"]`` turned by
     ``job["turn"]``."""
     from policies import RouteFollower, load_policy
+    from policies.opening import turned
     from training.common import env_settings, load_config, make_env
     from training.oracle import candidates
 

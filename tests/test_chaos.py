@@ -11,6 +11,7 @@ import pytest
 
 from benchmarks import chaos  # the repo root is on pytest's pythonpath
 from cnt_env.task.spaces import action_from_flow, flow_from_action
+from policies.opening import turned
 
 VBAR_MAX = 0.13
 
@@ -28,13 +29,13 @@ def test_a_turned_action_turns_the_flow_by_the_angle_and_keeps_its_speed(phi, sp
     a = action_from_flow(speed * VBAR_MAX, phi, VBAR_MAX)
     v0, p0 = flow_from_action(a, VBAR_MAX)
     for eps in (1e-4, -1e-4, 3e-4):
-        b = chaos.turned(a, eps, VBAR_MAX)
+        b = turned(a, eps, VBAR_MAX)
         assert b.dtype == np.float32
         v1, p1 = flow_from_action(b, VBAR_MAX)
         dphi = (p1 - p0 + math.pi) % (2 * math.pi) - math.pi
         assert dphi == pytest.approx(eps, rel=1e-3)
         assert v1 == pytest.approx(v0, abs=1e-8)
-    assert np.array_equal(chaos.turned(a, 0.0, VBAR_MAX), a)
+    assert np.array_equal(turned(a, 0.0, VBAR_MAX), a)
 
 
 def _rows(tmp_path: Path, rows: list[dict]) -> Path:
