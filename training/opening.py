@@ -6,11 +6,12 @@ families at the env's difficulty: never a held-out route) the base is played onc
 candidate turn (0 included) from the same start, on the held-out evaluation's env (the
 model, ``training/configs/eval.yml``), each episode to its end; rows go to
 ``DIR/rows.jsonl`` (resumable: a finished episode is not run again) until
-``--max-wall-seconds``. **Fit** (``DIR/opening.json``): per context, the paired gains
-score(turn) - score(0) over the seeds whose every turn finished; a context gets the turn
-of the largest mean gain if that mean is positive, its t statistic (mean over standard
-error) at least ``--t-min`` and its seeds at least ``--n-min`` [choice: 2 and 3, a
-one-sided ~95% rule on a handful of pairs]; else no turn.
+``--max-wall-seconds`` (0: fit the rows already there). **Fit** (``DIR/opening.json``):
+per context, the paired gains score(turn) - score(0) over the seeds whose every turn
+finished; a context gets the turn of the largest mean gain if that mean is positive, its
+t statistic (mean over standard error) at least ``--t-min`` and its seeds at least
+``--n-min`` [choice: 2 and 3, a one-sided ~95% rule on a handful of pairs, per test: with
+~20 contexts and turns, about one passes by chance]; else no turn.
 
 **Evaluate** (``--evaluate``): the base and the base with the opening on the held-out
 routes and seeds, paired, on one machine::
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     from cnt_env.cli.common import float_list, name_list, positive_int, seed_list
     from cnt_env.task.routes import HELD_OUT
     from policies.opening import Opening
-    from training.common import EVAL_CONFIG
+    from training.common import EVAL_CONFIG, shown_path
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
@@ -214,8 +215,9 @@ def main(argv: list[str] | None = None) -> int:
     table, stats = fit(rows, turns, args.t_min, args.n_min)
     opening = Opening(table, tuple(steps), args.sectors)
     record = {"opening": opening.to_dict(), "gains": stats, "turns": turns,
-              "t_min": args.t_min, "n_min": args.n_min, "base": args.base,
-              "config": str(args.config), "episodes": len(rows), "run_this_time": n,
+              "t_min": args.t_min, "n_min": args.n_min,
+              "base": args.base if args.base == "follower" else shown_path(args.base, ROOT),
+              "config": shown_path(args.config, ROOT), "episodes": len(rows), "run_this_time": n,
               "wall_s_this_run": round(time.perf_counter() - t0, 1)}  # fmt: skip
     (args.out / "opening.json").write_text(json.dumps(record, indent=1) + "\n")
     print(json.dumps(record, indent=1))
