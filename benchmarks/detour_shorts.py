@@ -8,9 +8,15 @@ residual dropped (its base's action played) while the nearest keep-out point is 
 ``--shield`` L_vb of the contact point (a probe of a safety shield; 0: none).
 
     python benchmarks/detour_shorts.py --first 1000 --count 124 --shield 30
+    python benchmarks/detour_shorts.py --first 1000 --count 124 --policies follower,agent \
+        --config policies/pretrained/ppo_residual.yml \
+        --out benchmarks/results/detour_shorts_surrogate.jsonl
 
-writes one JSON line per episode to ``benchmarks/results/detour_shorts.jsonl`` and prints
-the mean score and the routes shorted (a trace node in a keep-out) per policy.
+writes one JSON line per episode to ``--out`` (default
+``benchmarks/results/detour_shorts.jsonl``) and prints the mean score and the routes
+shorted (a trace node in a keep-out) per policy. ``--config``: the env of a config's
+``env_kwargs`` (default ``training/configs/eval.yml``, the model); the second command plays
+the detours of the surrogate the agent was trained on.
 """
 
 from __future__ import annotations
@@ -32,16 +38,18 @@ OUT = ROOT / "benchmarks/results/detour_shorts.jsonl"
 AGENT = ROOT / "policies/pretrained/ppo_residual.zip"
 
 
-def _env():
+def _env(config: str | None = None):
+    """The env of ``config`` (a training config's path; None: configs/eval.yml, the model)."""
     from training.common import EVAL_CONFIG, env_settings, limit_threads, load_config, make_env
 
     limit_threads()
-    return make_env(*env_settings(load_config(EVAL_CONFIG)))
+    return make_env(*env_settings(load_config(config or EVAL_CONFIG)))
 
 
-def family_of(seed: int) -> str:
-    """The family of the route the env draws at reset ``seed``."""
-    env = _env()
+def family_of(job: tuple[int, str | None]) -> str:
+    """The family of the route the env of config ``job[1]`` draws at reset ``job[0]``."""
+    seed, config = job
+    env = _env(config)
     _, info = env.reset(seed=seed)
     env.close()
     return str(info["target"])
@@ -52,7 +60,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     from policies import RouteFollower, load_policy
     from policies.residual import combine
 
-    env = _env()
+    env = _env(job.get("config"))
     obs, info = env.reset(seed=job["seed"])
     route = env.unwrapped.observation_slices["route"]
     if job["policy"] == "follower":
@@ -78,6 +86,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
             break
     env.close()
     return {"seed": job["seed"], "route": str(info["target"]), "policy": job["policy"],
+            "config": job.get("config"),
             "shield": job.get("shield"), "score": float(info["score"]),
             "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded}  # fmt: skip
 
@@ -92,19 +101,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--policies", type=name_list, default="follower,agent,shield")
     ap.add_argument("--shield", type=float, default=30.0, help="L_vb (policy 'shield')")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument(
+        "--config",
+        help="the env of this config's env_kwargs (default: "
+        "training/configs/eval.yml, the model; the agent's own, "
+        "policies/pretrained/ppo_residual.yml, is the surrogate it trained on)",
+    )
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     bad = sorted(set(args.policies) - {"follower", "agent", "shield"})
     if bad:
         ap.error(f"--policies takes follower, agent, shield; got {','.join(bad)}")
+    if args.config is not None and not Path(args.config).is_file():
+        ap.error(
+            f"--config {args.config}: no such file (a training config, e.g. "
+            "policies/pretrained/ppo_residual.yml)"
+        )
     rows: list[dict[str, Any]] = []
     args.out.write_text("")  # a fresh file per run; rows are appended as episodes end
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         drawn = list(range(args.first, args.first + args.count))
-        families = list(pool.map(family_of, drawn))
+        families = list(pool.map(family_of, [(s, args.config) for s in drawn]))
         seeds = [s for s, f in zip(drawn, families, strict=True) if f == args.family]
-        jobs = [{"seed": s, "policy": p, "shield": args.shield if p == "shield" else None}
-                for s in seeds for p in args.policies]  # fmt: skip
+        jobs = [{"seed": s, "policy": p, "shield": args.shield if p == "shield" else None,
+                 "config": args.config} for s in seeds for p in args.policies]  # fmt: skip
         for row in pool.map(episode, jobs):
             rows.append(row)
             with args.out.open("a") as fh:
