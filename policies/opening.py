@@ -27,18 +27,50 @@ import numpy as np
 
 from cnt_env.task.spaces import action_from_flow, flow_from_action
 
-__all__ = ["OpenedPolicy", "Opening", "context_of", "turned"]
+__all__ = [
+    "AXES",
+    "OpenedPolicy",
+    "Opening",
+    "context_of",
+    "route_axis",
+    "route_direction",
+    "turned",
+]
 
 #: The route point whose direction from the first one is the heading (4 points ahead:
 #: ~20 L_vb at the env's target spacing, past the start's noise and before a first turn).
 HEADING_POINT = 4
 
 
-def context_of(obs: np.ndarray, slices: dict[str, slice], sectors: int) -> str:
-    """The opening's context of one observation: heading sector and swing side."""
+#: The axes of :func:`route_axis`, counter-clockwise from +x (the warm flow's direction).
+AXES = ("+x", "+z", "-x", "-z")
+
+
+def route_direction(obs: np.ndarray, slices: dict[str, slice]) -> tuple[float, float]:
+    """The route's direction (x, z) ahead in one observation: from its first route point
+    to the ``HEADING_POINT``-th (not normalised)."""
     target = np.asarray(obs[slices["target"]], dtype=float).reshape(-1, 2)
     j = min(HEADING_POINT, len(target) - 1)
     hx, hz = target[j] - target[0]
+    return float(hx), float(hz)
+
+
+def axis_of(dx: float, dz: float) -> str:
+    """The axis of :data:`AXES` nearest the direction (dx, dz); x on a tie, "+x" for (0, 0)."""
+    if abs(dx) >= abs(dz):
+        return "+x" if dx >= 0.0 else "-x"
+    return "+z" if dz > 0.0 else "-z"
+
+
+def route_axis(obs: np.ndarray, slices: dict[str, slice]) -> str:
+    """The axis nearest the route's direction ahead in one observation (at an episode's
+    first: its first leg's, :func:`axis_of`)."""
+    return axis_of(*route_direction(obs, slices))
+
+
+def context_of(obs: np.ndarray, slices: dict[str, slice], sectors: int) -> str:
+    """The opening's context of one observation: heading sector and swing side."""
+    hx, hz = route_direction(obs, slices)
     heading = math.atan2(hz, hx) if (hx or hz) else 0.0
     width = 2.0 * math.pi / sectors
     sector = math.floor((heading + 0.5 * width) / width) % sectors

@@ -6,6 +6,10 @@ followed by ``base(obs)`` (:func:`observe`). The route follower acts on a memory
 band (its last control steps and its one-step lead) that the env's observation does not
 hold, so without it the agent cannot tell what it is correcting.
 
+With ``keepout_headings`` the route follower plays, the agent and its base idle, every
+episode whose route has a keep-out and a first leg along one of those axes
+(:class:`HeadingGate`): the routes on which the agent was measured to lose to it.
+
 The one implementation, used by the training wrapper (``training/common.py``
 ``ResidualAction``) and by trained residual agents at inference (``policies/sb3.py``).
 """
@@ -18,9 +22,12 @@ import numpy as np
 
 __all__ = [
     "BASES",
+    "NO_KEEPOUT",
     "WRAPPER",
+    "HeadingGate",
     "base_options",
     "combine",
+    "has_keepout",
     "make_base_policy",
     "observe",
     "observed_space",
@@ -30,6 +37,9 @@ __all__ = [
     "zoo_names",
 ]
 
+#: The nearest keep-out point of an observation without keep-outs (L_vb): the clip bound
+#: of positions (cnt_env/task/spaces.py), which the geometry's far point is clipped to.
+NO_KEEPOUT = 1000.0
 #: Base policies a residual agent can correct.
 BASES = ("scripted",)
 #: The rl-zoo ``env_wrapper`` entry of a residual agent (training/common.py).
@@ -98,6 +108,64 @@ def combine(base_action: np.ndarray, residual: np.ndarray, scale: float) -> np.n
     """clip(base + scale * residual, -1, 1) as float32."""
     a = np.asarray(base_action, dtype=np.float64) + scale * np.asarray(residual, dtype=np.float64)
     return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+
+class HeadingGate:
+    """Which episodes a residual agent hands to the route follower (``keepout_headings``):
+    those whose route has a keep-out and runs, at the episode's first observation,
+    nearest to one of the axes ``headings`` ("+x", "+z", "-x", "-z";
+    :func:`policies.opening.route_axis`). Empty: none. The follower (``fallback``) is the
+    scripted baseline with its defaults (policies/route_follower.py), not the agent's
+    pinned base: the shipped agent's base predates the follower's steering of runs along
+    the steps (``run_centre``), and lays those detours no better than the agent.
+
+    Why an option: the shipped agent shorts the keep-out at the first corner of most drawn
+    detours whose first leg runs down the steps' axis (-z), where the follower does not
+    (12 of 19 against 1 over three sets: two on the model, one on the surrogate it was
+    trained on), while on routes without a keep-out that start along -z it is ahead of the
+    follower (benchmarks/RESULTS.md, issue 10, "Drawn detours")."""
+
+    def __init__(self, headings: Any, slices: dict[str, slice], env: Any = None) -> None:
+        from .opening import AXES
+
+        if isinstance(headings, str) or not all(h in AXES for h in headings):
+            raise ValueError(f"keepout_headings must be a list of {list(AXES)}, got {headings!r}")
+        self.headings: tuple[str, ...] = tuple(headings)
+        self.slices = slices
+        self.fallback = None
+        if self.headings:
+            if env is None or getattr(env.unwrapped, "score_mode", None) != "corridor":
+                raise ValueError(
+                    "keepout_headings needs the route task's env (score 'corridor'): "
+                    "the follower it hands routes to reads it"
+                )
+            from .route_follower import RouteFollower
+
+            self.fallback = RouteFollower.from_env(env)
+        #: whether the follower plays this episode (set by :meth:`start`)
+        self.deferred = False
+
+    def reset(self, seed: int | None = None) -> None:
+        self.deferred = False
+        if self.fallback is not None:
+            self.fallback.reset(seed)
+
+    def start(self, obs: np.ndarray) -> bool:
+        """At an episode's first observation: whether the follower plays the episode."""
+        from .opening import route_axis
+
+        self.deferred = (bool(self.headings) and has_keepout(obs, self.slices)
+                         and route_axis(obs, self.slices) in self.headings)  # fmt: skip
+        return self.deferred
+
+
+def has_keepout(obs: np.ndarray, slices: dict[str, slice]) -> bool:
+    """Whether the observation's route has a keep-out: its nearest keep-out point (the last
+    two values of the ``route`` slice) is not the 1000 L_vb that stands for none."""
+    if "route" not in slices:
+        return False
+    kx, kz = (float(v) for v in obs[slices["route"]][1:3])
+    return max(abs(kx), abs(kz)) < NO_KEEPOUT
 
 
 def observe(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:

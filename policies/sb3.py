@@ -30,12 +30,13 @@ import re
 import warnings
 import zipfile
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .residual import combine, make_base_policy, observe, residual_settings
+from .residual import HeadingGate, combine, make_base_policy, observe, residual_settings
 
 __all__ = [
     "ALGOS",
@@ -289,7 +290,8 @@ class SB3Policy:
 
     def __init__(self, model, vecnormalize=None, name: str = "sb3", base=None,
                  scale: float = 0.0, frame_stack: int = 1,
-                 observe_base: bool = False) -> None:  # fmt: skip
+                 observe_base: bool = False,
+                 keepout_headings: Sequence[str] = ()) -> None:  # fmt: skip
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
@@ -302,15 +304,32 @@ class SB3Policy:
         #: newest last, zeros before the episode's first (SB3 VecFrameStack)
         self.frame_stack = int(frame_stack)
         self._stack: np.ndarray | None = None
+        #: residual agents: the routes handed to the route follower (policies/residual.py
+        #: ``HeadingGate``), decided at the first observation after :meth:`reset`
+        self.gate = None
+        if base is not None:
+            self.gate = HeadingGate(keepout_headings, base.slices, getattr(base, "_env", None))
+        elif keepout_headings:
+            raise ValueError("keepout_headings needs a residual agent (its base reads the env)")
+        self._gate_open = True
 
     def reset(self, seed: int | None = None) -> None:
         self._stack = None
+        self._gate_open = True
         if self.base is not None:
             self.base.reset(seed)
+        if self.gate is not None:
+            self.gate.reset(seed)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """The action for ``obs``; with ``frame_stack``, call :meth:`reset` at each
-        episode's start (the stack restarts there)."""
+        """The action for ``obs``; call :meth:`reset` at each episode's start (with
+        ``frame_stack`` the stack restarts there; with ``keepout_headings`` the route's
+        heading is read off the observation after it)."""
+        if self.gate is not None and self._gate_open:
+            self.gate.start(obs)
+            self._gate_open = False
+        if self.gate is not None and self.gate.deferred:
+            return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
         b = self.base.act(obs) if self.base is not None else None
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)[None]
         if self.vecnormalize is not None:
@@ -385,7 +404,8 @@ def check_model(model_path: str | Path, algo: str | None = None, trust: bool = F
 
 
 def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu",
-                trust: bool = False, env=None) -> SB3Policy:  # fmt: skip
+                trust: bool = False, env=None,
+                keepout_headings: Sequence[str] | None = None) -> SB3Policy:  # fmt: skip
     """Load ``model_path`` (``.zip``; ``algo`` from the file name if not given), the
     VecNormalize statistics beside it, if any, and, if the resolved config beside it
     (``<name>.yml``) says the agent is residual, its base policy with the options that
@@ -397,6 +417,9 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
     keep-outs and its memory of the band); without ``env`` the base sees only the
     observation, a weaker follower than the one the agent was trained on, and a warning
     says so.
+
+    ``keepout_headings`` overrides the config's (a residual agent's routes with a keep-out
+    handed to the route follower, :class:`policies.residual.HeadingGate`; ``()``: none).
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
@@ -417,7 +440,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         vn = load_vecnormalize(vn_path)
     elif vn_path.is_file():  # only with trust (check_model)
         vn = _load_vecnormalize_pickle(vn_path)
-    base, scale, n_stack, observe_base = None, 0.0, 1, False
+    base, scale, n_stack, observe_base, headings = None, 0.0, 1, False, ()
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
         cfg = model_config(model_path)
@@ -447,9 +470,11 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
                                     residual.get("base_kwargs"))  # fmt: skip
             scale = float(residual.get("scale", 0.5))
             observe_base = bool(residual.get("observe_base", False))
-    return SB3Policy(
-        model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack, observe_base=observe_base
-    )
+            headings = tuple(residual.get("keepout_headings") or ())
+    if keepout_headings is not None:
+        headings = tuple(keepout_headings)
+    return SB3Policy(model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack,
+                     observe_base=observe_base, keepout_headings=headings)  # fmt: skip
 
 
 # ---- VecNormalize statistics as data ------------------------------------------------------

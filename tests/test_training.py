@@ -943,6 +943,10 @@ def test_the_finetune_config_acts_on_the_shipped_agents_own_base() -> None:
     base["band_memory"] = 8
     record = check_trained_agent(shipped, "ppo", config)
     assert record["path"] == str(shipped) and len(record["sha256"]) == 64
+    # keepout_headings (which routes go to the follower) is not what the network acts on:
+    # the shipped agent's [-z] goes on training under none or another
+    config["env_wrapper"][0]["training.common.ResidualAction"]["keepout_headings"] = ["+z"]
+    assert check_trained_agent(shipped, "ppo", config)["path"] == str(shipped)
     with pytest.raises(ValueError, match="residual settings"):
         check_trained_agent(shipped, "ppo", load_config(CONFIG_DIR / "ppo_residual_calibrated.yml"))
 

@@ -25,6 +25,7 @@ from cnt_env.cli.common import (
 from cnt_env.task import routes, settings
 from cnt_env.task import targets as targets_mod
 from policies.residual import (
+    HeadingGate,
     combine,
     make_base_policy,
     observe,
@@ -299,31 +300,43 @@ class ResidualAction(gym.Wrapper):
     The wrapper sits below VecNormalize: the base sees the raw observation.
     ``base_kwargs`` are the base's options (policies/residual.py ``base_options``; its
     defaults when omitted); the trained model's config pins them. ``observe_base``
-    appends the base's action to the observation (policies/residual.py ``observe``)."""
+    appends the base's action to the observation (policies/residual.py ``observe``).
+    ``keepout_headings``: the route follower plays, the action ignored, episodes whose
+    route has a keep-out and starts along one of these axes (policies/residual.py
+    ``HeadingGate``)."""
 
     def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5,
                  base_kwargs: dict[str, Any] | None = None,
-                 observe_base: bool = False) -> None:  # fmt: skip
+                 observe_base: bool = False,
+                 keepout_headings: Sequence[str] = ()) -> None:  # fmt: skip
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
         self.base = make_base_policy(base, env, base_kwargs)
         self.observe_base = bool(observe_base)
+        self.gate = HeadingGate(keepout_headings, env.unwrapped.observation_slices, env)
         if self.observe_base:
             self.observation_space = observed_space(env.observation_space, env.action_space)
         self._base_action: np.ndarray | None = None
 
     def _observe(self, obs: np.ndarray) -> np.ndarray:
-        """The base acts on ``obs`` now (its action is played at the next step)."""
-        self._base_action = self.base.act(obs)
+        """The base (or, on a route ``keepout_headings`` hands over, the follower) acts on
+        ``obs`` now (its action is played at the next step)."""
+        policy = self.gate.fallback if self.gate.deferred else self.base
+        self._base_action = policy.act(obs)
         return observe(obs, self._base_action) if self.observe_base else obs
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self.base.reset(seed)
+        self.gate.reset(seed)
+        self.gate.start(obs)
         return self._observe(obs), info
 
     def step(self, action):
-        a = combine(self._base_action, action, self.scale)
+        if self.gate.deferred:  # keepout_headings: the follower plays this route
+            a = np.asarray(self._base_action, dtype=np.float32)
+        else:
+            a = combine(self._base_action, action, self.scale)
         obs, reward, terminated, truncated, info = self.env.step(a)
         return self._observe(obs), reward, terminated, truncated, info
 

@@ -374,6 +374,9 @@ def check_acts_alike(saved: dict[str, Any], config: dict[str, Any], new_base_opt
     mode = score_mode(env_kwargs)
     was = to_jsonable(residual_settings(pin_base(saved, mode)))
     now = to_jsonable(residual_settings(pin_base(config, mode)))
+    for settings in (was, now):  # which routes go to the follower: not what the network acts on
+        if settings is not None:
+            settings.pop("keepout_headings", None)
     record: dict[str, Any] = {}
     if was != now:
         same_base = None not in (was, now) and _but_options(was) == _but_options(now)
