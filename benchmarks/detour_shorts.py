@@ -1,22 +1,37 @@
 """The shipped residual agent and the follower on drawn detours, on the model (issue 10).
 
-The held-out set has one route with a keep-out (``detour_block``, first leg along +z).
+The held-out set has one route with a keep-out (``detour_block``, whose first leg runs
+along +x) and no route whose first leg runs along -z.
 This plays the routes the env draws for ``--count`` reset seeds from ``--first`` (its
 default families at its default difficulty, as ``training/opening.py`` drew them) and
-keeps those of ``--family``: per route, the follower, the agent, and the agent with its
-residual dropped (its base's action played) while the nearest keep-out point is within
-``--shield`` L_vb of the contact point (a probe of a safety shield; 0: none).
+keeps those of ``--family`` (``any``: all) and, with ``--heading``, those whose first leg
+runs along that axis: per route, the policies ``--policies`` of :data:`POLICIES`: the
+follower; the agent as shipped (with its config's ``keepout_headings``: on a route with a
+keep-out whose first leg runs along -z it plays its base alone, policies/residual.py
+``HeadingGate``); the agent without them (``ungated``); and the shield, the ungated agent
+with its residual dropped (its base's action played) while the nearest keep-out point is
+within ``--shield`` L_vb of the contact point (a probe of a safety shield); ``base``, the
+agent's base alone (the follower with the options the agent's config pins).
+Rows written before the gate was shipped (2026-12-06) have the ungated agent as "ungated".
 
-    python benchmarks/detour_shorts.py --first 1000 --count 124 --shield 30
-    python benchmarks/detour_shorts.py --first 1000 --count 124 --policies follower,agent \
+    python benchmarks/detour_shorts.py --first 1000 --count 124 \
+        --policies follower,ungated,shield --shield 30
+    python benchmarks/detour_shorts.py --first 1000 --count 124 --policies follower,ungated \
         --config policies/pretrained/ppo_residual.yml \
         --out benchmarks/results/detour_shorts_surrogate.jsonl
+    python benchmarks/detour_shorts.py --first 2000 --count 100 --family any --heading=-z \
+        --policies follower,ungated --out benchmarks/results/minus_z_starts.jsonl
+
+(and ``--family detour --heading=-z --policies agent`` or ``base`` on each, into
+``*_agent.jsonl`` and ``*_base.jsonl``: benchmarks/RESULTS.md, issue 10, "Drawn detours")
 
 writes one JSON line per episode to ``--out`` (default
 ``benchmarks/results/detour_shorts.jsonl``) and prints the mean score and the routes
 shorted (a trace node in a keep-out) per policy. ``--config``: the env of a config's
 ``env_kwargs`` (default ``training/configs/eval.yml``, the model); the second command plays
-the detours of the surrogate the agent was trained on.
+the detours of the surrogate the agent was trained on. Each row records the axis the
+route's first leg runs along and, for a shorted episode, the control step and progress
+at its first short; ``--summarize FILE ...`` prints the summary of files again.
 """
 
 from __future__ import annotations
@@ -36,6 +51,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 OUT = ROOT / "benchmarks/results/detour_shorts.jsonl"
 AGENT = ROOT / "policies/pretrained/ppo_residual.zip"
+#: follower; the agent as shipped (with its config's keepout_headings); the agent without
+#: them ("ungated"); the shield probe over the ungated agent; the agent's base alone
+POLICIES = ("follower", "agent", "ungated", "shield", "base")
 
 
 def _env(config: str | None = None):
@@ -46,13 +64,15 @@ def _env(config: str | None = None):
     return make_env(*env_settings(load_config(config or EVAL_CONFIG)))
 
 
-def family_of(job: tuple[int, str | None]) -> str:
-    """The family of the route the env of config ``job[1]`` draws at reset ``job[0]``."""
+def drawn_route(job: tuple[int, str | None]) -> tuple[str, str]:
+    """The family of the route the env of config ``job[1]`` draws at reset ``job[0]``, and
+    the axis its first leg runs along (:func:`first_heading`)."""
     seed, config = job
     env = _env(config)
     _, info = env.reset(seed=seed)
+    heading = first_heading(env.unwrapped.target.waypoints)
     env.close()
-    return str(info["target"])
+    return str(info["target"]), heading
 
 
 def episode(job: dict[str, Any]) -> dict[str, Any]:
@@ -65,10 +85,15 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     route = env.unwrapped.observation_slices["route"]
     if job["policy"] == "follower":
         policy = RouteFollower.from_env(env)
-    else:
+    elif job["policy"] == "agent":  # as shipped: its config's keepout_headings
         policy = load_policy(AGENT, env=env)
+    else:  # ungated, shield, base: the agent without them
+        policy = load_policy(AGENT, env=env, keepout_headings=())
+        if job["policy"] == "base":  # its base alone, with the options its config pins
+            policy = policy.base
     policy.reset(job["seed"])
     steps = shielded = 0
+    first_short: tuple[int, float] | None = None  # (control step, progress G then)
     while True:
         if job["policy"] == "shield":
             b = policy.base.act(obs)
@@ -82,13 +107,45 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
             action = policy.act(obs)
         obs, _, term, trunc, info = env.step(action)
         steps += 1
+        if first_short is None and info["shorts"] > 0:
+            first_short = (steps, float(info["progress"]))
         if term or trunc:
             break
+    heading = first_heading(env.unwrapped.target.waypoints)
     env.close()
     return {"seed": job["seed"], "route": str(info["target"]), "policy": job["policy"],
-            "config": job.get("config"),
+            "config": job.get("config"), "heading": heading,
             "shield": job.get("shield"), "score": float(info["score"]),
-            "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded}  # fmt: skip
+            "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded,
+            "first_short_step": first_short and first_short[0],
+            "progress_at_short": first_short and first_short[1]}  # fmt: skip
+
+
+def first_heading(waypoints: np.ndarray) -> str:
+    """The axis the route's first leg runs along: "+x", "-x", "+z" or "-z" (the nearest;
+    :func:`policies.opening.axis_of`)."""
+    from policies.opening import axis_of
+
+    dx, dz = np.asarray(waypoints[1], dtype=float) - np.asarray(waypoints[0], dtype=float)
+    return axis_of(dx, dz)
+
+
+def summary(rows: list[dict[str, Any]]) -> list[str]:
+    """Per policy: the mean score and the routes shorted, over all and per first heading."""
+    lines = []
+    for p in dict.fromkeys(r["policy"] for r in rows):
+        rs = [r for r in rows if r["policy"] == p]
+        shorted = [r["seed"] for r in rs if r["shorts"] > 0]
+        lines.append(f"{p}: mean {statistics.fmean(r['score'] for r in rs):.3f} over "
+                     f"{len(rs)} routes, {len(shorted)} shorted {shorted}")  # fmt: skip
+        for h in ("+x", "-x", "+z", "-z"):
+            hs = [r for r in rs if r.get("heading") == h]
+            if hs:
+                at = [(r["seed"], r["first_short_step"], round(r["progress_at_short"], 2))
+                      for r in hs if r["shorts"] > 0]  # fmt: skip
+                lines.append(f"  first leg {h}: mean {statistics.fmean(r['score'] for r in hs):.3f}"
+                             f" over {len(hs)}; shorted (seed, step, progress): {at}")  # fmt: skip
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,8 +154,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=seed_int, default=1000, help="the first reset seed")
     ap.add_argument("--count", type=positive_int, default=124, help="reset seeds drawn")
-    ap.add_argument("--family", default="detour")
-    ap.add_argument("--policies", type=name_list, default="follower,agent,shield")
+    ap.add_argument("--family", default="detour", help="the family kept, or 'any'")
+    ap.add_argument("--heading", choices=("+x", "-x", "+z", "-z"),
+                    help="keep only routes whose first leg runs along this axis")  # fmt: skip
+    ap.add_argument("--policies", type=name_list, default="follower,agent,ungated,shield")
     ap.add_argument("--shield", type=float, default=30.0, help="L_vb (policy 'shield')")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument(
@@ -108,10 +167,20 @@ def main(argv: list[str] | None = None) -> int:
         "policies/pretrained/ppo_residual.yml, is the surrogate it trained on)",
     )
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--summarize", type=Path, nargs="+", metavar="JSONL",
+                    help="print the summary of files this wrote, and run nothing")  # fmt: skip
     args = ap.parse_args(argv)
-    bad = sorted(set(args.policies) - {"follower", "agent", "shield"})
+    if args.summarize is not None:
+        missing = [str(f) for f in args.summarize if not f.is_file()]
+        if missing:
+            ap.error(f"--summarize: no such file {', '.join(missing)}")
+        rows = [json.loads(line) for f in args.summarize
+                for line in f.read_text().splitlines() if line]  # fmt: skip
+        print("\n".join(summary(rows)))
+        return 0
+    bad = sorted(set(args.policies) - set(POLICIES))
     if bad:
-        ap.error(f"--policies takes follower, agent, shield; got {','.join(bad)}")
+        ap.error(f"--policies takes {', '.join(POLICIES)}; got {','.join(bad)}")
     if args.config is not None and not Path(args.config).is_file():
         ap.error(
             f"--config {args.config}: no such file (a training config, e.g. "
@@ -121,8 +190,14 @@ def main(argv: list[str] | None = None) -> int:
     args.out.write_text("")  # a fresh file per run; rows are appended as episodes end
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         drawn = list(range(args.first, args.first + args.count))
-        families = list(pool.map(family_of, [(s, args.config) for s in drawn]))
-        seeds = [s for s, f in zip(drawn, families, strict=True) if f == args.family]
+        kinds = list(pool.map(drawn_route, [(s, args.config) for s in drawn]))
+        seeds = [s for s, (f, h) in zip(drawn, kinds, strict=True)
+                 if args.family in ("any", f) and args.heading in (None, h)]  # fmt: skip
+        if not seeds:
+            print(f"no route of family {args.family!r}" + (f", first leg {args.heading}" if
+                  args.heading else "") + f" in reset seeds {drawn[0]}-{drawn[-1]}",
+                  file=sys.stderr)  # fmt: skip
+            return 1
         jobs = [{"seed": s, "policy": p, "shield": args.shield if p == "shield" else None,
                  "config": args.config} for s in seeds for p in args.policies]  # fmt: skip
         for row in pool.map(episode, jobs):
@@ -130,11 +205,7 @@ def main(argv: list[str] | None = None) -> int:
             with args.out.open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(json.dumps(row), flush=True)
-    for p in args.policies:
-        rs = [r for r in rows if r["policy"] == p]
-        if rs:
-            print(f"{p}: mean {statistics.fmean(r['score'] for r in rs):.3f} over {len(rs)} "
-                  f"{args.family} routes, {sum(r['shorts'] > 0 for r in rs)} shorted")  # fmt: skip
+    print("\n".join(summary(rows)))
     return 0
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from benchmarks import detour_shorts  # the repo root is on pytest's pythonpath
@@ -20,3 +21,41 @@ def test_bad_arguments_exit_with_a_usage_error(argv: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         detour_shorts.main([*argv])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize(
+    ("second", "heading"),
+    [((5.0, 1.0), "+x"), ((-5.0, 1.0), "-x"), ((1.0, 5.0), "+z"), ((1.0, -5.0), "-z")],
+)
+def test_first_heading_is_the_nearest_axis_of_the_first_leg(second, heading) -> None:
+    assert (
+        detour_shorts.first_heading(
+            np.array([[2.0, 3.0], [2.0 + second[0], 3.0 + second[1]], [9.0, 9.0]])
+        )
+        == heading
+    )
+
+
+def test_summary_counts_shorts_and_splits_by_heading() -> None:
+    row = {"policy": "agent", "shorts": 0, "first_short_step": None, "progress_at_short": None}
+    rows = [
+        {**row, "seed": 1, "heading": "-z", "score": 0.0, "shorts": 4, "first_short_step": 6,
+         "progress_at_short": 0.183},
+        {**row, "seed": 2, "heading": "-z", "score": 0.8},
+        {**row, "seed": 3, "heading": "+x", "score": 0.9},
+    ]  # fmt: skip
+    lines = detour_shorts.summary(rows)
+    assert lines[0] == "agent: mean 0.567 over 3 routes, 1 shorted [1]"
+    assert lines[1] == "  first leg +x: mean 0.900 over 1; shorted (seed, step, progress): []"
+    assert (
+        lines[2]
+        == "  first leg -z: mean 0.400 over 2; shorted (seed, step, progress): [(1, 6, 0.18)]"
+    )
+    assert len(lines) == 3
+
+
+def test_summarize_prints_a_file_again(tmp_path, capsys) -> None:
+    f = tmp_path / "rows.jsonl"
+    f.write_text('{"policy": "follower", "seed": 7, "heading": "+z", "score": 0.5, "shorts": 0}\n')
+    assert detour_shorts.main(["--summarize", str(f)]) == 0
+    assert capsys.readouterr().out.startswith("follower: mean 0.500 over 1 routes, 0 shorted []")
