@@ -6,8 +6,8 @@ This plays the routes the env draws for ``--count`` reset seeds from ``--first``
 default families at its default difficulty, as ``training/opening.py`` drew them) and
 keeps those of ``--family`` (``any``: all) and, with ``--heading``, those whose first leg
 runs along that axis: per route, the policies ``--policies`` of :data:`POLICIES`: the
-follower; the agent as shipped (with its config's ``keepout_headings``: on a route with a
-keep-out whose first leg runs along -z it plays its base alone, policies/residual.py
+follower; the agent as shipped (with its config's ``keepout_headings``: a route with a
+keep-out whose first leg runs along -z is handed to the follower, policies/residual.py
 ``HeadingGate``); the agent without them (``ungated``); and the shield, the ungated agent
 with its residual dropped (its base's action played) while the nearest keep-out point is
 within ``--shield`` L_vb of the contact point (a probe of a safety shield); ``base``, the
@@ -76,7 +76,7 @@ def drawn_route(job: tuple[int, str | None]) -> tuple[str, str]:
 
 
 def episode(job: dict[str, Any]) -> dict[str, Any]:
-    """One episode of ``job["policy"]`` (follower, agent, shield) at reset ``job["seed"]``."""
+    """One episode of ``job["policy"]`` (one of :data:`POLICIES`) at reset ``job["seed"]``."""
     from policies import RouteFollower, load_policy
     from policies.residual import combine
 
@@ -150,12 +150,13 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     from cnt_env.cli.common import name_list, positive_int, seed_int
+    from policies.opening import AXES
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=seed_int, default=1000, help="the first reset seed")
     ap.add_argument("--count", type=positive_int, default=124, help="reset seeds drawn")
     ap.add_argument("--family", default="detour", help="the family kept, or 'any'")
-    ap.add_argument("--heading", choices=("+x", "-x", "+z", "-z"),
+    ap.add_argument("--heading", choices=AXES,
                     help="keep only routes whose first leg runs along this axis")  # fmt: skip
     ap.add_argument("--policies", type=name_list, default="follower,agent,ungated,shield")
     ap.add_argument("--shield", type=float, default=30.0, help="L_vb (policy 'shield')")

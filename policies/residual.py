@@ -22,7 +22,6 @@ import numpy as np
 
 __all__ = [
     "BASES",
-    "NO_KEEPOUT",
     "WRAPPER",
     "HeadingGate",
     "base_options",
@@ -37,9 +36,6 @@ __all__ = [
     "zoo_names",
 ]
 
-#: The nearest keep-out point of an observation without keep-outs (L_vb): the clip bound
-#: of positions (cnt_env/task/spaces.py), which the geometry's far point is clipped to.
-NO_KEEPOUT = 1000.0
 #: Base policies a residual agent can correct.
 BASES = ("scripted",)
 #: The rl-zoo ``env_wrapper`` entry of a residual agent (training/common.py).
@@ -142,30 +138,38 @@ class HeadingGate:
             from .route_follower import RouteFollower
 
             self.fallback = RouteFollower.from_env(env)
-        #: whether the follower plays this episode (set by :meth:`start`)
+        #: whether the follower plays this episode (decided by :meth:`defers`)
         self.deferred = False
+        self._pending = True  # the next observation is an episode's first
 
     def reset(self, seed: int | None = None) -> None:
-        self.deferred = False
+        """A new episode: the next observation decides it."""
+        self.deferred, self._pending = False, True
         if self.fallback is not None:
             self.fallback.reset(seed)
 
-    def start(self, obs: np.ndarray) -> bool:
-        """At an episode's first observation: whether the follower plays the episode."""
-        from .opening import route_axis
+    def defers(self, obs: np.ndarray) -> bool:
+        """Whether the follower plays the episode ``obs`` belongs to, decided at its first
+        observation (the first after :meth:`reset`)."""
+        if self._pending:
+            from .opening import route_axis
 
-        self.deferred = (bool(self.headings) and has_keepout(obs, self.slices)
-                         and route_axis(obs, self.slices) in self.headings)  # fmt: skip
+            self.deferred = (bool(self.headings) and has_keepout(obs, self.slices)
+                             and route_axis(obs, self.slices) in self.headings)  # fmt: skip
+            self._pending = False
         return self.deferred
 
 
 def has_keepout(obs: np.ndarray, slices: dict[str, slice]) -> bool:
     """Whether the observation's route has a keep-out: its nearest keep-out point (the last
-    two values of the ``route`` slice) is not the 1000 L_vb that stands for none."""
+    two values of the ``route`` slice) is not the far point that stands for none, clipped
+    to the position bound (cnt_env/task/spaces.py ``POSITION_BOUND``, 1000 L_vb)."""
+    from cnt_env.task.spaces import POSITION_BOUND
+
     if "route" not in slices:
         return False
     kx, kz = (float(v) for v in obs[slices["route"]][1:3])
-    return max(abs(kx), abs(kz)) < NO_KEEPOUT
+    return max(abs(kx), abs(kz)) < POSITION_BOUND
 
 
 def observe(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:

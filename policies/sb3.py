@@ -311,11 +311,9 @@ class SB3Policy:
             self.gate = HeadingGate(keepout_headings, base.slices, getattr(base, "_env", None))
         elif keepout_headings:
             raise ValueError("keepout_headings needs a residual agent (its base reads the env)")
-        self._gate_open = True
 
     def reset(self, seed: int | None = None) -> None:
         self._stack = None
-        self._gate_open = True
         if self.base is not None:
             self.base.reset(seed)
         if self.gate is not None:
@@ -325,10 +323,7 @@ class SB3Policy:
         """The action for ``obs``; call :meth:`reset` at each episode's start (with
         ``frame_stack`` the stack restarts there; with ``keepout_headings`` the route's
         heading is read off the observation after it)."""
-        if self.gate is not None and self._gate_open:
-            self.gate.start(obs)
-            self._gate_open = False
-        if self.gate is not None and self.gate.deferred:
+        if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
         b = self.base.act(obs) if self.base is not None else None
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)[None]

@@ -1,6 +1,6 @@
-"""keepout_headings (policies/residual.py HeadingGate): the routes a residual agent leaves to
-its base alone, read off an episode's first observation; at inference (SB3Policy) and in
-the training wrapper (training.common.ResidualAction) alike."""
+"""keepout_headings (policies/residual.py HeadingGate): the routes with a keep-out that a
+residual agent hands to the route follower, read off an episode's first observation; at
+inference (SB3Policy) and in the training wrapper (training.common.ResidualAction) alike."""
 
 from __future__ import annotations
 

@@ -321,7 +321,7 @@ class ResidualAction(gym.Wrapper):
     def _observe(self, obs: np.ndarray) -> np.ndarray:
         """The base (or, on a route ``keepout_headings`` hands over, the follower) acts on
         ``obs`` now (its action is played at the next step)."""
-        policy = self.gate.fallback if self.gate.deferred else self.base
+        policy = self.gate.fallback if self.gate.defers(obs) else self.base
         self._base_action = policy.act(obs)
         return observe(obs, self._base_action) if self.observe_base else obs
 
@@ -329,7 +329,6 @@ class ResidualAction(gym.Wrapper):
         obs, info = self.env.reset(seed=seed, options=options)
         self.base.reset(seed)
         self.gate.reset(seed)
-        self.gate.start(obs)
         return self._observe(obs), info
 
     def step(self, action):
