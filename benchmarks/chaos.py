@@ -32,7 +32,6 @@ per route and mode the unperturbed score and the perturbed mean, std, min and ma
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import statistics
 import sys
@@ -44,6 +43,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import name_list, nonnegative_int, seed_list  # noqa: E402
+from cnt_env.jsonl import append_row, read_rows  # noqa: E402
 
 OUT = ROOT / "benchmarks/results/chaos/chaos.jsonl"
 AGENT = ROOT / "policies/pretrained/ppo_residual.zip"
@@ -101,8 +101,7 @@ def oracle_choices(paths: list[Path]) -> dict[tuple[str, int], list[int]]:
     last row wins)."""
     out: dict[tuple[str, int], list[int]] = {}
     for path in paths:
-        for line in path.read_text().splitlines():
-            row = json.loads(line)
+        for row in read_rows(path):
             if row.get("mode") == "oracle" and row.get("choices") and row.get("horizon") is None:
                 out[(row["target"], int(row["seed"]))] = [int(c) for c in row["choices"]]
     return out
@@ -186,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.out.is_file():
             print(f"chaos.py: no episodes in {args.out}", file=sys.stderr)
             return 2
-        rows = [json.loads(line) for line in args.out.read_text().splitlines() if line]
+        rows = read_rows(args.out)
         print("\n".join(summary(rows)))
         return 0
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -194,9 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(episode, jobs):
             rows.append(row)
-            with args.out.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
-            print(json.dumps(row), flush=True)
+            append_row(args.out, row, echo=True)
     print("\n".join(summary(rows)))
     return 0
 

@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks import reproduce  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 
 
 def coil_point(
@@ -77,10 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     for spec in args.points:
         h, delta = spec.split(":")
         row = coil_point(None if h == "eq1" else float(h), float(delta), args.Hbar, args.drag_law)
-        print(json.dumps(row), flush=True)
         if args.out is not None:
-            with args.out.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
+            append_row(args.out, row, echo=True)
+        else:
+            print(json.dumps(row), flush=True)
     return 0
 
 

@@ -37,7 +37,6 @@ at its first short; ``--summarize FILE ...`` prints the summary of files again.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import statistics
 import sys
@@ -49,6 +48,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from cnt_env.jsonl import append_row, read_rows  # noqa: E402
+
 OUT = ROOT / "benchmarks/results/detour_shorts.jsonl"
 AGENT = ROOT / "policies/pretrained/ppo_residual.zip"
 #: follower; the agent as shipped (with its config's keepout_headings); the agent without
@@ -175,8 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         missing = [str(f) for f in args.summarize if not f.is_file()]
         if missing:
             ap.error(f"--summarize: no such file {', '.join(missing)}")
-        rows = [json.loads(line) for f in args.summarize
-                for line in f.read_text().splitlines() if line]  # fmt: skip
+        rows = [row for f in args.summarize for row in read_rows(f)]
         print("\n".join(summary(rows)))
         return 0
     bad = sorted(set(args.policies) - set(POLICIES))
@@ -203,9 +203,7 @@ def main(argv: list[str] | None = None) -> int:
                  "config": args.config} for s in seeds for p in args.policies]  # fmt: skip
         for row in pool.map(episode, jobs):
             rows.append(row)
-            with args.out.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
-            print(json.dumps(row), flush=True)
+            append_row(args.out, row, echo=True)
     print("\n".join(summary(rows)))
     return 0
 

@@ -28,6 +28,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from cnt_env.cli.common import name_list, seed_list
+from cnt_env.jsonl import append_row
 from training.common import EVAL_CONFIG
 
 FAMILIES = ("straight", "l_route", "u_route", "staircase", "arc", "band", "pads", "detour")
@@ -102,10 +103,9 @@ def main(argv: list[str] | None = None) -> None:
             for name, opts in variants.items() for f in families for s in seeds]  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
     by = defaultdict(list)
-    with mp.get_context("forkserver").Pool(args.jobs) as pool, args.out.open("a") as fh:
+    with mp.get_context("forkserver").Pool(args.jobs) as pool:
         for row in pool.imap(_episode, jobs):
-            fh.write(json.dumps(row) + "\n")
-            fh.flush()
+            append_row(args.out, row)
             by[row["variant"], row["family"]].append(row["score"])
     print("| variant | " + " | ".join(families) + " | mean |")
     print("|---" * (len(families) + 2) + "|")

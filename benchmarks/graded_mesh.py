@@ -31,6 +31,7 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from cnt_env.cli.common import seed_list  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 
 
 def run_case(case: dict) -> dict:
@@ -124,12 +125,11 @@ def main(argv: list[str] | None = None) -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(run_case, cases):
             row["command"] = command
-            line = json.dumps(row)
-            print(line, flush=True)
             if args.out is not None:
                 args.out.parent.mkdir(parents=True, exist_ok=True)
-                with args.out.open("a") as fh:
-                    fh.write(line + "\n")
+                append_row(args.out, row, echo=True)
+            else:
+                print(json.dumps(row), flush=True)
 
 
 if __name__ == "__main__":

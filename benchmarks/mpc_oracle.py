@@ -18,7 +18,6 @@ writes one JSON line per episode (oracle and follower on the same seed) to
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -28,6 +27,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import float_list, name_list, nonnegative_int, seed_list  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 
 OUT = ROOT / "benchmarks/results/mpc_oracle.jsonl"
 
@@ -135,9 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(episode, jobs):
             rows.append(row)
-            with args.out.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
-            print(json.dumps(row), flush=True)
+            append_row(args.out, row, echo=True)
     print("| target | seed | follower | oracle | deviations / steps |")
     print("|---|---|---|---|---|")
     pairs: dict[tuple[str, int], dict[str, dict[str, Any]]] = {}

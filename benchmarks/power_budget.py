@@ -42,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cnt_env.cli.common import float_list  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 from cnt_env.sim.deposition import ContactOptions  # noqa: E402
 
 
@@ -227,10 +228,10 @@ def main(argv: list[str] | None = None) -> int:
         if h is not None:
             changes["contact"] = ContactOptions(adhesion="cohesive", cohesive_range=h)
         row = budget(args.preset, delta, transient, args.window, args.near, **changes)
-        print(json.dumps(row))
         if args.out is not None:
-            with args.out.open("a") as f:
-                f.write(json.dumps(row) + "\n")
+            append_row(args.out, row, echo=True)
+        else:
+            print(json.dumps(row), flush=True)
     return 0
 
 

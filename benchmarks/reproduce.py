@@ -41,6 +41,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from cnt_env.cli.common import seed_list  # noqa: E402
+from cnt_env.jsonl import append_row, read_rows  # noqa: E402
 
 #: Named model configurations of the study (DepositionConfig fields). "default" is
 #: whatever presets.py / DepositionConfig carry; the others name what they change.
@@ -557,13 +558,7 @@ def remeasure(out: Path) -> int:
 
 
 def load_done(path: Path) -> dict[str, dict[str, Any]]:
-    done: dict[str, dict[str, Any]] = {}
-    if path.exists():
-        for line in path.read_text().splitlines():
-            if line.strip():
-                rec = json.loads(line)
-                done[rec["key"]] = rec
-    return done
+    return {rec["key"]: rec for rec in read_rows(path)}
 
 
 def _fmt(x: Any, nd: int = 1) -> str:
@@ -590,8 +585,7 @@ def log_invocation(out: Path, points: int, wall: float, jobs: int, dt_factor: fl
         "wall_s": round(wall), "jobs": jobs, "dt_factor": dt_factor,
         "argv": list(sys.argv[1:] if argv is None else argv),
     }  # fmt: skip
-    with (out / "invocations.jsonl").open("a") as fh:
-        fh.write(json.dumps(rec) + "\n")
+    append_row(out / "invocations.jsonl", rec)
 
 
 def invocations_text(out: Path) -> str:
@@ -602,12 +596,10 @@ def invocations_text(out: Path) -> str:
     lines = ["", "## Invocations that ran points", "",
              "| finished (UTC) | points | dt_factor | jobs | wall s | arguments |",
              "|---|---|---|---|---|---|"]  # fmt: skip
-    for line in path.read_text().splitlines():
-        if line.strip():
-            r = json.loads(line)
-            dt = "default" if r["dt_factor"] is None else r["dt_factor"]
-            lines.append(f"| {r['finished']} | {r['points']} | {dt} | {r['jobs']} "
-                         f"| {r['wall_s']} | `{' '.join(r['argv'])}` |")  # fmt: skip
+    for r in read_rows(path):
+        dt = "default" if r["dt_factor"] is None else r["dt_factor"]
+        lines.append(f"| {r['finished']} | {r['points']} | {dt} | {r['jobs']} "
+                     f"| {r['wall_s']} | `{' '.join(r['argv'])}` |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -1129,8 +1121,7 @@ def main(argv: list[str] | None = None) -> int:
         nonlocal n_run
         n_run += 1
         rec = res["record"]
-        with results.open("a") as fh:
-            fh.write(json.dumps(rec) + "\n")
+        append_row(results, rec)
         if not args.no_traces:
             name = rec["key"].replace("|", "__").replace(",", "_")
             np.save(out / "traces" / f"{name}.npy", res["trace"])

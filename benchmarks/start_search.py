@@ -35,6 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from cnt_env.cli.common import name_list, seed_list  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 
 
 def _outside(env: Any, first: float) -> tuple[float, float, float]:
@@ -135,9 +136,9 @@ def main(argv: list[str] | None = None) -> int:
         for row in pool.map(search, jobs):
             rows.append(row)
             if args.out:
-                with args.out.open("a") as fh:
-                    fh.write(json.dumps(row) + "\n")
-            print(json.dumps(row), flush=True)
+                append_row(args.out, row, echo=True)
+            else:
+                print(json.dumps(row), flush=True)
     print(f"| target | seed | follower: first {args.first:g} / after | best start: first / "
           "after (flows) |\n|---|---|---|---|")  # fmt: skip
     for r in rows:

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cnt_env.jsonl import append_row
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "surrogate_fidelity.jsonl"
 CALIBRATED_CONFIG = ROOT / "training" / "configs" / "ppo_residual_calibrated.yml"
@@ -92,8 +94,7 @@ def main(argv: list[str] | None = None) -> None:
                   f"{record['corr_with_first']:+.2f} with {next(iter(physics))}), "
                   f"{record['steps']} steps, {laid:.0f} L_vb, {laid / cpu:.0f} L_vb per CPU-s",
                   flush=True)  # fmt: skip
-            with args.out.open("a") as fh:
-                fh.write(json.dumps(record) + "\n")
+            append_row(args.out, record)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ LAYERS: dict[str, int] = {
     "cnt_env.units": 0,
     "cnt_env.presets": 0,
     "cnt_env.io": 0,
+    "cnt_env.jsonl": 0,
     "cnt_env.rod": 1,
     "cnt_env.sim": 2,
     "cnt_env.patterns": 3,

@@ -45,6 +45,24 @@ def test_quick_table_runs_and_resumes(tmp_path: Path, capsys) -> None:
     assert "## Invocations that ran points" in text and "| 3 | default | 2 |" in text
 
 
+def test_a_record_cut_by_a_crash_is_run_again(tmp_path: Path, capsys) -> None:
+    args = [*QUICK[:-2], "--out", str(tmp_path)]  # the coil point only
+    assert reproduce.main(args) == 0
+    path = tmp_path / "results.jsonl"
+    whole = path.read_text()
+    before = _records(tmp_path)
+    path.write_text(whole[: len(whole) // 2])  # killed while writing its record
+    capsys.readouterr()
+    assert reproduce.main(args) == 0
+    out = capsys.readouterr()
+    assert "1 points to run (0 already" in out.out
+    assert "dropped" in out.err and "incomplete last line" in out.err
+    after = _records(tmp_path)  # the same point, run again, bit for bit (but its wall time)
+    assert after.keys() == before.keys()
+    for key, rec in after.items():
+        assert {**rec, "wall_s": 0} == {**before[key], "wall_s": 0}
+
+
 @pytest.mark.slow
 def test_ray_backend_gives_the_same_points(tmp_path: Path) -> None:
     pytest.importorskip("ray")

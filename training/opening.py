@@ -32,6 +32,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
+from cnt_env.jsonl import append_row, read_rows
+
 ROOT = Path(__file__).resolve().parents[1]
 AGENT = ROOT / "policies/pretrained/ppo_residual.zip"
 
@@ -172,8 +174,7 @@ def main(argv: list[str] | None = None) -> int:
 
         def sink(row: dict[str, Any]) -> None:
             rows.append(row)
-            with out.open("a") as fh:
-                fh.write(json.dumps(row) + "\n")
+            append_row(out, row)
 
         jobs = [{**common, "target": t, "seed": s, "turn": 0.0,
                  **({"opening": opening} if opened else {})}
@@ -193,14 +194,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     rows_path = args.out / "rows.jsonl"
-    rows = [json.loads(x) for x in rows_path.read_text().splitlines()] if rows_path.exists() else []
+    rows = read_rows(rows_path)
     have = {(int(r["seed"]), float(r["turn"])) for r in rows}
 
     def sink(row: dict[str, Any]) -> None:
         rows.append(row)
-        with rows_path.open("a") as fh:
-            fh.write(json.dumps(row) + "\n")
-        print(json.dumps(row), flush=True)
+        append_row(rows_path, row, echo=True)
 
     def jobs_iter():
         seed = args.seed0
