@@ -41,7 +41,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from cnt_env.cli.common import seed_list  # noqa: E402
-from cnt_env.jsonl import append_row, read_rows  # noqa: E402
+from cnt_env.jsonl import JsonlError, append_row, read_rows  # noqa: E402
 
 #: Named model configurations of the study (DepositionConfig fields). "default" is
 #: whatever presets.py / DepositionConfig carry; the others name what they change.
@@ -1106,10 +1106,13 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     results = out / "results.jsonl"
-    if args.remeasure:
-        print(f"re-measured {remeasure(out)} points", flush=True)
-        table = {}
-    done = load_done(results)
+    try:
+        if args.remeasure:
+            print(f"re-measured {remeasure(out)} points", flush=True)
+            table = {}
+        done = load_done(results)
+    except JsonlError as exc:  # a results file this did not write: refused, kept as it is
+        ap.error(str(exc))
     todo = [(p, c, sd) for c in candidates for row in table.values() for p in row
             for sd in seeds if point_key(p, c, args.dt_factor, sd) not in done]  # fmt: skip
     print(f"{len(todo)} points to run ({len(done)} already in {results})", flush=True)

@@ -63,6 +63,16 @@ def test_a_record_cut_by_a_crash_is_run_again(tmp_path: Path, capsys) -> None:
         assert {**rec, "wall_s": 0} == {**before[key], "wall_s": 0}
 
 
+def test_a_results_file_it_did_not_write_is_refused(tmp_path: Path, capsys) -> None:
+    text = '{"key": "a"}\nnot a record\n{"key": "b"}\n'
+    (tmp_path / "results.jsonl").write_text(text)
+    with pytest.raises(SystemExit) as exc:
+        reproduce.main([*QUICK, "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "results.jsonl, line 2: not a JSON line" in capsys.readouterr().err
+    assert (tmp_path / "results.jsonl").read_text() == text
+
+
 @pytest.mark.slow
 def test_ray_backend_gives_the_same_points(tmp_path: Path) -> None:
     pytest.importorskip("ray")
