@@ -1,0 +1,31 @@
+"""benchmarks/width_or_shape.py: the routes it writes and its paired table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from benchmarks import width_or_shape  # the repo root is on pytest's pythonpath
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_hard_routes_are_those_of_the_difficulty_1_set() -> None:
+    committed = json.loads((ROOT / "benchmarks/results/difficulty1_routes.json").read_text())[0]
+    route = width_or_shape.drawn(1000, 1.0)
+    assert route["waypoints"] == committed["waypoints"] and route["width"] == committed["width"]
+
+
+def test_the_table_pairs_episodes_by_route_and_seed(tmp_path: Path) -> None:
+    rows = []
+    for target, follower, agent in (("a", 0.8, 0.9), ("b", 0.9, 0.7)):
+        for seed in (0, 1):
+            rows += [{"policy": "scripted", "target": target, "seed": seed, "score": follower},
+                     {"policy": "ppo_residual", "target": target, "seed": seed,
+                      "score": agent + 0.01 * seed}]  # fmt: skip
+    (tmp_path / "mid").mkdir()
+    (tmp_path / "mid" / "episodes.json").write_text(json.dumps(rows))
+    lines = width_or_shape.table(tmp_path)
+    assert len(lines) == 3  # header, rule, the one set found
+    assert lines[2].startswith("| mid | 2 x 2 | 0.850 | 0.805 | -0.045 ± ")
+    assert lines[2].endswith("(1 / 1) |")
