@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -63,10 +64,20 @@ def write_routes(out: Path) -> None:
         print(f"{out / name}.json: " + ", ".join(f"{r['name']} w={r['width']:.1f}" for r in rows))
 
 
+def _mean_se(values: list[float]) -> str:
+    """Mean ± its standard error ("-" for no value)."""
+    if not values:
+        return "-"
+    se = statistics.stdev(values) / len(values) ** 0.5 if len(values) > 1 else math.nan
+    return f"{statistics.fmean(values):+.3f} ± {se:.3f}"
+
+
 def table(out: Path) -> list[str]:
-    """Per set: the follower's and the agent's mean score and their paired difference."""
+    """Per set: the follower's and the agent's mean score and their paired difference, over
+    every route and over the routes without a keep-out (the detours)."""
     lines = ["| set | routes x seeds | follower | residual PPO | agent - follower (per route: "
-             "ahead / behind) |", "|---|---|---|---|---|"]  # fmt: skip
+             "ahead / behind) | the same without the detours |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
     for name in SETS:
         path = out / name / "episodes.json"
         if not path.is_file():
@@ -81,12 +92,12 @@ def table(out: Path) -> list[str]:
             per_route.setdefault(t, []).append(d)
         ahead = sum(statistics.fmean(v) > 0 for v in per_route.values())
         behind = sum(statistics.fmean(v) < 0 for v in per_route.values())
-        se = statistics.stdev(diffs) / len(diffs) ** 0.5
+        open_diffs = [d for (t, _), d in zip(keys, diffs, strict=True) if "detour" not in t]
         lines.append(
             f"| {name} | {len(per_route)} x {len(keys) // len(per_route)} | "
             f"{statistics.fmean(score['scripted', t, s] for t, s in keys):.3f} | "
             f"{statistics.fmean(score['ppo_residual', t, s] for t, s in keys):.3f} | "
-            f"{statistics.fmean(diffs):+.3f} ± {se:.3f} ({ahead} / {behind}) |"
+            f"{_mean_se(diffs)} ({ahead} / {behind}) | {_mean_se(open_diffs)} |"
         )
     return lines
 
