@@ -10,11 +10,14 @@ at reset seeds 1000-1011, the seeds of ``difficulty1_routes.json``:
   half-width, ``routes.DEFAULT_HALF_WIDTH`` (the band's own, wider, is kept);
 - ``mid.json``: the routes drawn at the training difficulty, 0.5, at their own width;
 - ``mid_narrow.json``: the same routes with the half-width of the difficulty-1 route of
-  the same seed.
+  the same seed;
+- ``detour_sides.json``: which side of the keep-out a detour goes round. The held-out
+  ``detour_block`` (round its +z side) and ``mid``'s two detours (round their -z side),
+  each with its mirror image in z (``_mz``: the other side).
 
 Then, for each file::
 
-    cnt-evaluate --route-file DIR/FILE --policies scripted,ppo_residual --seeds 0,1 \\
+    cnt-evaluate --route-file DIR/FILE --policies scripted,ppo_residual --seeds 0,1,2 \\
         --out DIR/FILE_STEM --jobs 2
 
 (``python benchmarks/width_or_shape.py --out DIR --write-routes`` writes the files;
@@ -30,10 +33,12 @@ import statistics
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 SEEDS = range(1000, 1012)
-SETS = ("hard_wide", "mid", "mid_narrow")
+SETS = ("hard_wide", "mid", "mid_narrow", "detour_sides")
 OUT = ROOT / "benchmarks/results/width_or_shape"
 
 
@@ -59,6 +64,19 @@ def write_routes(out: Path) -> None:
         "mid": mid,
         "mid_narrow": [{**m, "width": h["width"]} for m, h in zip(mid, hard, strict=True)],
     }
+    from cnt_env.task.routes import held_out
+
+    def mirrored(route: dict) -> dict:
+        def flip(points: list) -> list:
+            return (np.asarray(points, dtype=float).reshape(-1, 2) * [1.0, -1.0]).tolist()
+
+        return {**route, "name": route["name"] + "_mz", "waypoints": flip(route["waypoints"]),
+                "pads": [flip(p) for p in route["pads"]],
+                "keepouts": [flip(k) for k in route["keepouts"]]}  # fmt: skip
+
+    block = {**held_out("detour_block").to_dict(), "name": "held_out_detour_block"}  # a new name
+    detours = [block] + [r for r in mid if "detour" in r["name"]]
+    files["detour_sides"] = [d for r in detours for d in (r, mirrored(r))]
     for name, rows in files.items():
         (out / f"{name}.json").write_text(json.dumps(rows, indent=1) + "\n")
         print(f"{out / name}.json: " + ", ".join(f"{r['name']} w={r['width']:.1f}" for r in rows))

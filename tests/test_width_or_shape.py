@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks import width_or_shape  # the repo root is on pytest's pythonpath
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,3 +31,17 @@ def test_the_table_pairs_episodes_by_route_and_seed(tmp_path: Path) -> None:
     assert len(lines) == 3  # header, rule, the one set found
     assert lines[2].startswith("| mid | 2 x 2 | 0.850 | 0.805 | -0.045 ± ")
     assert lines[2].endswith("(1 / 1) | +0.105 ± 0.005 |")  # without b_detour
+
+
+def test_each_detour_side_is_the_mirror_image_of_the_other() -> None:
+    rows = json.loads((ROOT / "benchmarks/results/width_or_shape/detour_sides.json").read_text())
+    by_name = {r["name"]: r for r in rows}
+    mirrors = [n for n in by_name if n.endswith("_mz")]
+    assert len(mirrors) == 3 and len(by_name) == 6
+    for name in mirrors:
+        a, b = by_name[name.removesuffix("_mz")], by_name[name]
+        assert b["width"] == a["width"]
+        for key in ("waypoints", "keepouts"):
+            pa, pb = np.asarray(a[key], dtype=float), np.asarray(b[key], dtype=float)
+            assert np.array_equal(pb[..., 0], pa[..., 0])
+            assert np.array_equal(pb[..., 1], -pa[..., 1])
