@@ -53,8 +53,19 @@ def drawn(seed: int, difficulty: float) -> dict:
     return {**route, "name": f"s{seed}_{info['target']}"}
 
 
+def mirrored(route: dict) -> dict:
+    """``route`` (a route dict) mirrored in z, named with ``_mz``: round the other side."""
+
+    def flip(points: list) -> list:
+        return (np.asarray(points, dtype=float).reshape(-1, 2) * [1.0, -1.0]).tolist()
+
+    return {**route, "name": route["name"] + "_mz", "waypoints": flip(route["waypoints"]),
+            "pads": [flip(p) for p in route["pads"]],
+            "keepouts": [flip(k) for k in route["keepouts"]]}  # fmt: skip
+
+
 def write_routes(out: Path) -> None:
-    from cnt_env.task.routes import DEFAULT_HALF_WIDTH
+    from cnt_env.task.routes import DEFAULT_HALF_WIDTH, held_out
 
     out.mkdir(parents=True, exist_ok=True)
     hard = [drawn(s, 1.0) for s in SEEDS]
@@ -64,16 +75,6 @@ def write_routes(out: Path) -> None:
         "mid": mid,
         "mid_narrow": [{**m, "width": h["width"]} for m, h in zip(mid, hard, strict=True)],
     }
-    from cnt_env.task.routes import held_out
-
-    def mirrored(route: dict) -> dict:
-        def flip(points: list) -> list:
-            return (np.asarray(points, dtype=float).reshape(-1, 2) * [1.0, -1.0]).tolist()
-
-        return {**route, "name": route["name"] + "_mz", "waypoints": flip(route["waypoints"]),
-                "pads": [flip(p) for p in route["pads"]],
-                "keepouts": [flip(k) for k in route["keepouts"]]}  # fmt: skip
-
     block = {**held_out("detour_block").to_dict(), "name": "held_out_detour_block"}  # a new name
     detours = [block] + [r for r in mid if "detour" in r["name"]]
     files["detour_sides"] = [d for r in detours for d in (r, mirrored(r))]
