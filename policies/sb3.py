@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from cnt_env.task.spaces import ACTION_Z_MIRROR
+
 from .residual import HeadingGate, combine, make_base_policy, observe, residual_settings
 
 __all__ = [
@@ -291,7 +293,8 @@ class SB3Policy:
     def __init__(self, model, vecnormalize=None, name: str = "sb3", base=None,
                  scale: float = 0.0, frame_stack: int = 1,
                  observe_base: bool = False,
-                 keepout_headings: Sequence[str] = ()) -> None:  # fmt: skip
+                 keepout_headings: Sequence[str] = (),
+                 mirror_signs: np.ndarray | None = None) -> None:  # fmt: skip
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
@@ -303,7 +306,15 @@ class SB3Policy:
         #: rl-zoo ``frame_stack``: the model sees the last n normalised observations,
         #: newest last, zeros before the episode's first (SB3 VecFrameStack)
         self.frame_stack = int(frame_stack)
-        self._stack: np.ndarray | None = None
+        #: one stack per view: the observation, and with ``mirror_signs`` its mirror image
+        self._stacks: dict[bool, np.ndarray] = {}
+        #: ``mirror_average``: the model's action is the mean of its action for the
+        #: observation and, mirrored back, for the observation's mirror image in z
+        #: (signs from ``ObservationLayout.z_mirror_signs``; with ``observe_base`` the
+        #: base's action follows, its z mirrored too)
+        self.mirror_signs = (
+            None if mirror_signs is None else np.asarray(mirror_signs, dtype=np.float32)
+        )
         #: residual agents: the routes handed to the route follower (policies/residual.py
         #: ``HeadingGate``), decided at the first observation after :meth:`reset`
         self.gate = None
@@ -313,7 +324,7 @@ class SB3Policy:
             raise ValueError("keepout_headings needs a residual agent (its base reads the env)")
 
     def reset(self, seed: int | None = None) -> None:
-        self._stack = None
+        self._stacks = {}
         if self.base is not None:
             self.base.reset(seed)
         if self.gate is not None:
@@ -326,21 +337,34 @@ class SB3Policy:
         if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
         b = self.base.act(obs) if self.base is not None else None
-        o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)[None]
+        o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
+        a = self._model_action(o, mirrored=False)
+        if self.mirror_signs is not None:
+            signs = self.mirror_signs
+            if self.observe_base:
+                signs = np.concatenate([signs, ACTION_Z_MIRROR])
+            mirrored = self._model_action(o * signs, mirrored=True) * ACTION_Z_MIRROR
+            a = (0.5 * (a.astype(np.float64) + mirrored)).astype(np.float32)
+        if b is not None:
+            return combine(b, a, self.scale)
+        return a
+
+    def _model_action(self, o: np.ndarray, mirrored: bool) -> np.ndarray:
+        """The model's deterministic action for the raw observation ``o`` (d,), through
+        its normalisation and its frame stack (one per view)."""
+        o = o[None]
         if self.vecnormalize is not None:
             o = self.vecnormalize.normalize_obs(o)
         if self.frame_stack > 1:
             d = o.shape[-1]
-            if self._stack is None:
-                self._stack = np.zeros((1, d * self.frame_stack), dtype=o.dtype)
-            self._stack = np.roll(self._stack, -d, axis=-1)
-            self._stack[:, -d:] = o
-            o = self._stack
+            stack = self._stacks.get(mirrored)
+            if stack is None:
+                stack = np.zeros((1, d * self.frame_stack), dtype=o.dtype)
+            stack = np.roll(stack, -d, axis=-1)
+            stack[:, -d:] = o
+            self._stacks[mirrored] = o = stack
         action, _ = self.model.predict(o, deterministic=True)
-        a = np.asarray(action, dtype=np.float32).reshape(-1)
-        if b is not None:
-            return combine(b, a, self.scale)
-        return a
+        return np.asarray(action, dtype=np.float32).reshape(-1)
 
 
 def model_config(model_path: Path) -> Any:
@@ -400,7 +424,8 @@ def check_model(model_path: str | Path, algo: str | None = None, trust: bool = F
 
 def load_policy(model_path: str | Path, algo: str | None = None, device: str = "cpu",
                 trust: bool = False, env=None,
-                keepout_headings: Sequence[str] | None = None) -> SB3Policy:  # fmt: skip
+                keepout_headings: Sequence[str] | None = None,
+                mirror_average: bool | None = None) -> SB3Policy:  # fmt: skip
     """Load ``model_path`` (``.zip``; ``algo`` from the file name if not given), the
     VecNormalize statistics beside it, if any, and, if the resolved config beside it
     (``<name>.yml``) says the agent is residual, its base policy with the options that
@@ -415,6 +440,10 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
 
     ``keepout_headings`` overrides the config's (a residual agent's routes with a keep-out
     handed to the route follower, :class:`policies.residual.HeadingGate`; ``()``: none).
+    ``mirror_average`` overrides the config's (the residual's ``mirror_average``, default
+    false): the model's action averaged with its action for the observation's mirror
+    image in z, mirrored back (:class:`SB3Policy`; needs ``env``, whose observation layout
+    gives the signs).
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
@@ -435,7 +464,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         vn = load_vecnormalize(vn_path)
     elif vn_path.is_file():  # only with trust (check_model)
         vn = _load_vecnormalize_pickle(vn_path)
-    base, scale, n_stack, observe_base, headings = None, 0.0, 1, False, ()
+    base, scale, n_stack, observe_base, headings, mirror = None, 0.0, 1, False, (), False
     cfg_path = model_path.with_suffix(".yml")
     if cfg_path.is_file():
         cfg = model_config(model_path)
@@ -466,10 +495,23 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
             scale = float(residual.get("scale", 0.5))
             observe_base = bool(residual.get("observe_base", False))
             headings = tuple(residual.get("keepout_headings") or ())
+            mirror = bool(residual.get("mirror_average", False))
     if keepout_headings is not None:
         headings = tuple(keepout_headings)
+    if mirror_average is not None:
+        mirror = bool(mirror_average)
+    signs = None
+    if mirror:
+        layout = getattr(getattr(env, "unwrapped", None), "layout", None)
+        if layout is None or getattr(env.unwrapped, "obs_mode", None) == "image":
+            raise ValueError(
+                "mirror_average needs env=, a CNTDeposit-v0 with the vector "
+                "observation (its layout gives the mirror's signs)"
+            )
+        signs = layout.z_mirror_signs()
     return SB3Policy(model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack,
-                     observe_base=observe_base, keepout_headings=headings)  # fmt: skip
+                     observe_base=observe_base, keepout_headings=headings,
+                     mirror_signs=signs)  # fmt: skip
 
 
 # ---- VecNormalize statistics as data ------------------------------------------------------

@@ -303,12 +303,15 @@ class ResidualAction(gym.Wrapper):
     appends the base's action to the observation (policies/residual.py ``observe``).
     ``keepout_headings``: the route follower plays, the action ignored, episodes whose
     route has a keep-out and starts along one of these axes (policies/residual.py
-    ``HeadingGate``)."""
+    ``HeadingGate``). ``mirror_average`` is an option of the trained agent at inference
+    (policies/sb3.py ``SB3Policy``), accepted here so that its config trains on (with
+    ``--trained-agent``); training acts through the model alone, unaveraged."""
 
     def __init__(self, env: gym.Env, base: str = "scripted", scale: float = 0.5,
                  base_kwargs: dict[str, Any] | None = None,
                  observe_base: bool = False,
-                 keepout_headings: Sequence[str] = ()) -> None:  # fmt: skip
+                 keepout_headings: Sequence[str] = (),
+                 mirror_average: bool = False) -> None:  # fmt: skip
         super().__init__(env)
         self.base_name, self.scale = base, float(scale)
         self.base = make_base_policy(base, env, base_kwargs)

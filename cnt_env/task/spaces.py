@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 __all__ = [
+    "ACTION_Z_MIRROR",
     "LAID_RATIO_BOUND",
     "LEAN_HEIGHTS",
     "LEAN_HEIGHT_FRACTIONS",
@@ -53,6 +54,11 @@ def flow_from_action(action: np.ndarray, vbar_max: float) -> tuple[float, float]
     vbar = min(vbar_max * math.hypot(u, w), vbar_max)
     phi = math.atan2(w, u) if vbar > 0.0 else 0.0
     return vbar, phi
+
+
+#: Signs that map an action to the one of the flow's mirror image in z (phi -> -phi): the
+#: elliptical grid map keeps the sign of each component (u ~ a_x, w ~ a_z).
+ACTION_Z_MIRROR = np.array([1.0, -1.0], dtype=np.float32)
 
 
 def action_from_flow(vbar: float, phi: float, vbar_max: float) -> np.ndarray:
@@ -165,6 +171,24 @@ class ObservationLayout:
 
     def space(self) -> spaces.Box:
         return spaces.Box(self.low, self.high, dtype=np.float32)
+
+    def z_mirror_signs(self) -> np.ndarray:
+        """Signs (+-1, float32) that map an observation to the one of its mirror image in
+        z (z -> -z): every z offset changes sign (trace and target points, the flow's z,
+        the contact edge's and the lean's z, the nearest keep-out point's z); heights,
+        progress values and the corridor's width do not. The simulator is symmetric under
+        it to the last bit (both substrates, the rod, the drag; tests/test_deposition.py),
+        so the mirror image of a state is a state of the same env; but every episode
+        starts from one warm state, which is not its own mirror image."""
+        signs = np.ones(self.size, dtype=np.float32)
+        sl = self.slices
+        for name in ("trace", "target", "flow"):
+            signs[sl[name].start + 1 : sl[name].stop : 2] = -1.0  # (x, z) pairs
+        rod = sl["rod"]  # height, edge (x, z), lean (x, z) per height
+        signs[rod.start + 2 : rod.stop : 2] = -1.0
+        if self.route:
+            signs[sl["route"].start + 2] = -1.0  # w, keep-out (x, z)
+        return signs
 
     def build(self, trace: np.ndarray, ahead: np.ndarray, flow_xz: np.ndarray,
               rod: np.ndarray, progress: np.ndarray, trace_window: float | None = None,

@@ -1,0 +1,80 @@
+"""mirror_average (policies/sb3.py SB3Policy): a trained agent's action averaged with its
+action for the observation's mirror image in z, mirrored back, so the policy is
+equivariant under the substrate's z-mirror symmetry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cnt_env.task.spaces import ACTION_Z_MIRROR
+from policies import PRETRAINED_DIR, load_policy
+from policies.sb3 import SB3Policy
+
+pytestmark = pytest.mark.usefixtures("temp_warm_cache")
+AGENT = PRETRAINED_DIR / "ppo_residual.zip"
+
+
+class _Model:
+    """A deterministic, nonlinear, not equivariant stand-in for an SB3 model."""
+
+    def __init__(self, d: int) -> None:
+        self.w = np.random.default_rng(0).normal(size=(d, 2)).astype(np.float32)
+
+    def predict(self, o: np.ndarray, deterministic: bool = True):
+        assert deterministic
+        return np.tanh(o @ self.w[: o.shape[-1]] + 0.3), None
+
+
+@pytest.mark.parametrize("n_stack", [1, 3])
+def test_the_mirror_average_is_equivariant_and_changes_the_action(n_stack) -> None:
+    d = 6
+    signs = np.array([1, -1, 1, -1, 1, 1], dtype=np.float32)
+    model = _Model(d * n_stack)
+    mirrored = SB3Policy(model, frame_stack=n_stack, mirror_signs=signs)
+    plain = SB3Policy(model, frame_stack=n_stack)
+    twin = SB3Policy(model, frame_stack=n_stack, mirror_signs=signs)
+    rng = np.random.default_rng(1)
+    for p in (mirrored, plain, twin):
+        p.reset(0)
+    for _ in range(4):  # through the frame stacks, one per view
+        o = rng.normal(size=d).astype(np.float32)
+        a, m = mirrored.act(o), twin.act(o * signs)
+        assert np.array_equal(m, a * ACTION_Z_MIRROR)  # exact: +-1 and a commuted sum
+        assert not np.allclose(a, plain.act(o))
+
+
+@pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
+def test_the_config_key_and_the_override_set_it() -> None:
+    import gymnasium as gym
+
+    from training.common import env_settings, load_config
+
+    env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / "ppo_residual.yml"))
+    env = gym.make("CNTDeposit-v0", **env_kwargs)
+    assert load_policy(AGENT, env=env).mirror_signs is None  # shipped: off
+    on = load_policy(AGENT, env=env, mirror_average=True)
+    assert np.array_equal(on.mirror_signs, env.unwrapped.layout.z_mirror_signs())
+    obs, _ = env.reset(seed=3)
+    on.reset(3)
+    off = load_policy(AGENT, env=env)
+    off.reset(3)
+    assert not np.array_equal(on.act(obs), off.act(obs))
+    env.close()
+
+
+@pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
+def test_mirror_average_needs_the_vector_observations_env() -> None:
+    with pytest.raises(ValueError, match="mirror_average needs env="):
+        load_policy(PRETRAINED_DIR / "ppo.zip", mirror_average=True)
+
+
+def test_the_training_wrapper_accepts_the_inference_option() -> None:
+    import gymnasium as gym
+
+    from training.common import ResidualAction
+
+    env = gym.make("CNTDeposit-v0", score="corridor", max_episode_steps=2)
+    w = ResidualAction(env, scale=1.0, mirror_average=True)
+    w.reset(seed=0)
+    env.close()
