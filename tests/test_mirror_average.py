@@ -78,3 +78,34 @@ def test_the_training_wrapper_accepts_the_inference_option() -> None:
     w = ResidualAction(env, scale=1.0, mirror_average=True)
     w.reset(seed=0)
     env.close()
+
+
+class _EquivariantBase:
+    """A base policy that mirrors with the observation: (tanh o0, tanh o1), o1 a z."""
+
+    def __init__(self) -> None:
+        self.slices: dict = {}
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        return np.tanh(np.asarray(obs[:2], dtype=np.float32))
+
+    def reset(self, seed: int | None = None) -> None:
+        pass
+
+
+@pytest.mark.parametrize("observe_base", [False, True])
+def test_a_residual_over_an_equivariant_base_is_equivariant(observe_base) -> None:
+    """The residual agent's whole action (clip(base + scale * mean)) mirrors with the
+    observation when its base does; with ``observe_base`` the base's action, appended to
+    the observation, is mirrored in the second view too."""
+    d = 6
+    signs = np.array([1, -1, 1, -1, 1, 1], dtype=np.float32)
+    model = _Model(d + (2 if observe_base else 0))
+
+    def agent() -> SB3Policy:
+        return SB3Policy(model, base=_EquivariantBase(), scale=0.8, observe_base=observe_base,
+                         mirror_signs=signs)  # fmt: skip
+
+    a, b = agent(), agent()
+    o = np.random.default_rng(2).normal(size=d).astype(np.float32)
+    assert np.array_equal(b.act(o * signs), a.act(o) * ACTION_Z_MIRROR)
