@@ -278,3 +278,57 @@ def test_the_mirror_image_in_z_of_a_run_is_the_run_of_the_mirrored_flow(preset) 
         traces.append(sim.trace())
     assert np.abs(traces[0][:, 2]).max() > 5.0  # the trace leaves the plane z = 0
     assert np.array_equal(traces[1], traces[0] * [1.0, 1.0, -1.0])
+
+
+def _moved(sim: DepositionSim, perm: list[int], sign: list[float], shift: list[float]) -> None:
+    """Move ``sim``'s whole state by the proper isometry p -> sign * p[perm] + shift (a
+    quarter turn about y or the identity, then a translation): positions, velocities,
+    forces, frames, the flow and the per-axis substrate fields (permuted), and the trace."""
+    perm_, sign_, shift_ = np.asarray(perm), np.asarray(sign, float), np.asarray(shift, float)
+    snap = sim.snapshot()
+    rod = snap["rod"]
+    for key, kind in (("q", "point"), ("sub_anchor", "point"), ("u", "vector"),
+                      ("ext_force", "vector"), ("fixed", "axis"), ("sub_friction", "axis"),
+                      ("sub_stiffness", "axis")):  # fmt: skip
+        xyz = rod[key].reshape(-1, 4)[:, :3]  # (x, y, z, theta) per node; theta is unchanged
+        moved = xyz[:, perm_] if kind == "axis" else sign_ * xyz[:, perm_]
+        xyz[...] = moved + shift_ if kind == "point" else moved
+    for key in ("tangents_old", "d1_old", "flow"):
+        rod[key] = sign_ * rod[key][..., perm_]
+    snap["trace"] = sign_ * snap["trace"][:, perm_] + shift_
+    sim.restore(snap)
+
+
+QUARTER_TURN = ([2, 1, 0], [1.0, 1.0, -1.0])  # (x, y, z) -> (z, y, -x), about y
+NO_TURN = ([0, 1, 2], [1.0, 1.0, 1.0])
+
+
+@pytest.mark.parametrize(
+    ("preset", "turn", "shift", "invariant"),
+    [("coil", QUARTER_TURN, [0.0, 0.0, 0.0], True),
+     ("coil", NO_TURN, [13.3, 0.0, -7.1], True),
+     ("serpentine", NO_TURN, [13.3, 0.0, -7.1], True),
+     ("serpentine", QUARTER_TURN, [0.0, 0.0, 0.0], False)],
+)  # fmt: skip
+def test_the_run_moves_with_the_state_where_the_substrate_allows(preset, turn, shift,
+                                                                 invariant) -> None:  # fmt: skip
+    """Translation in x and z on both substrates (the snap rule reads edge directions,
+    not positions), and a quarter turn about y (with the flow turned too) on the flat one:
+    the moved start lays the moved trace, to rounding grown over 30 L_vb (~1e-9 seen; the
+    bound is 1e-7). The steps (along z) break the turn: there the traces part by L_vb."""
+    perm, sign = turn
+    hbar = 40.0 if preset == "serpentine" else 30.0
+    cfg = DepositionConfig(params=paper_groups(preset, Hbar=hbar), initial_radius=4.0,
+                           perturbation=0.0)  # fmt: skip
+    phi, turned = 0.7, 0.7 - (math.pi / 2 if perm == QUARTER_TURN[0] else 0.0)
+    ref, moved = DepositionSim(cfg, seed=0), DepositionSim(cfg, seed=0)
+    _moved(moved, perm, sign, shift)
+    ref.set_flow(0.1, phi)
+    moved.set_flow(0.1, turned)
+    ref.run(30.0)
+    moved.run(30.0)
+    want = np.asarray(sign) * ref.trace()[:, perm] + np.asarray(shift)
+    got = moved.trace()
+    assert got.shape == want.shape
+    err = float(np.abs(got - want).max())
+    assert err < 1e-7 if invariant else err > 1.0
