@@ -30,7 +30,7 @@ import re
 import warnings
 import zipfile
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -294,7 +294,7 @@ class SB3Policy:
                  scale: float = 0.0, frame_stack: int = 1,
                  observe_base: bool = False,
                  keepout_headings: Sequence[str] = (),
-                 mirror_signs: np.ndarray | None = None) -> None:  # fmt: skip
+                 mirror: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
         self.model = model
         self.vecnormalize = vecnormalize
         self.name = name
@@ -306,15 +306,13 @@ class SB3Policy:
         #: rl-zoo ``frame_stack``: the model sees the last n normalised observations,
         #: newest last, zeros before the episode's first (SB3 VecFrameStack)
         self.frame_stack = int(frame_stack)
-        #: one stack per view: the observation, and with ``mirror_signs`` its mirror image
+        #: one stack per view: the observation, and with ``mirror`` its mirror image
         self._stacks: dict[bool, np.ndarray] = {}
         #: ``mirror_average``: the model's action is the mean of its action for the
         #: observation and, mirrored back, for the observation's mirror image in z
-        #: (signs from ``ObservationLayout.z_mirror_signs``; with ``observe_base`` the
-        #: base's action follows, its z mirrored too)
-        self.mirror_signs = (
-            None if mirror_signs is None else np.asarray(mirror_signs, dtype=np.float32)
-        )
+        #: (``mirror``: the env's ``ObservationLayout.z_mirror``; with ``observe_base``
+        #: the base's action follows, its z mirrored too)
+        self.mirror = mirror
         #: residual agents: the routes handed to the route follower (policies/residual.py
         #: ``HeadingGate``), decided at the first observation after :meth:`reset`
         self.gate = None
@@ -339,11 +337,11 @@ class SB3Policy:
         b = self.base.act(obs) if self.base is not None else None
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
         a = self._model_action(o, mirrored=False)
-        if self.mirror_signs is not None:
-            signs = self.mirror_signs
+        if self.mirror is not None:
+            om = self.mirror(np.asarray(obs, dtype=np.float32))
             if self.observe_base:
-                signs = np.concatenate([signs, ACTION_Z_MIRROR])
-            mirrored = self._model_action(o * signs, mirrored=True) * ACTION_Z_MIRROR
+                om = observe(om, b * ACTION_Z_MIRROR)
+            mirrored = self._model_action(om, mirrored=True) * ACTION_Z_MIRROR
             a = (0.5 * (a.astype(np.float64) + mirrored)).astype(np.float32)
         if b is not None:
             return combine(b, a, self.scale)
@@ -500,18 +498,18 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
         headings = tuple(keepout_headings)
     if mirror_average is not None:
         mirror = bool(mirror_average)
-    signs = None
+    mirror_of = None
     if mirror:
         layout = getattr(getattr(env, "unwrapped", None), "layout", None)
         if layout is None or getattr(env.unwrapped, "obs_mode", None) == "image":
             raise ValueError(
                 "mirror_average needs env=, a CNTDeposit-v0 with the vector "
-                "observation (its layout gives the mirror's signs)"
+                "observation (its layout gives the mirror image)"
             )
-        signs = layout.z_mirror_signs()
+        mirror_of = layout.z_mirror
     return SB3Policy(model, vn, name=algo, base=base, scale=scale, frame_stack=n_stack,
                      observe_base=observe_base, keepout_headings=headings,
-                     mirror_signs=signs)  # fmt: skip
+                     mirror=mirror_of)  # fmt: skip
 
 
 # ---- VecNormalize statistics as data ------------------------------------------------------

@@ -987,3 +987,43 @@ def test_route_file_draws_your_own_routes(tmp_path) -> None:
         CNTDepositEnv(**{**SMALL, "score": "corridor", "route_file": str(path)})
     with pytest.raises(ValueError, match="route_file needs the route task"):
         CNTDepositEnv(**SMALL, route_file=str(path))
+
+
+def test_a_mirrored_start_lays_the_mirror_image_of_the_episode(kw) -> None:
+    """``start_mirror="always"`` starts from the warm state's mirror image in z: with the
+    route and every action mirrored too, the episode is the mirror image of the original
+    one, to the last bit: the observation is ``z_mirror`` of the original's (the route
+    task's observation, keep-out point included, and one with no keep-out) and the rewards
+    are equal."""
+    from cnt_env.task.spaces import ACTION_Z_MIRROR
+
+    keep = [{"rect": [10.0, 4.0, 20.0, 12.0]}]
+    route = {"waypoints": [[0.0, 0.0], [30.0, 0.0], [30.0, 20.0]], "keepouts": keep}
+    mirrored_keep = [{"rect": [10.0, -12.0, 20.0, -4.0]}]
+    mirrored = {"waypoints": [[0.0, 0.0], [30.0, 0.0], [30.0, -20.0]],
+                "keepouts": mirrored_keep}  # fmt: skip
+    for pair in ((route, mirrored), ({"waypoints": route["waypoints"]},
+                                     {"waypoints": mirrored["waypoints"]})):  # fmt: skip
+        plain = make(kw, score="corridor")
+        mirror = make(kw, score="corridor", start_mirror="always")
+        z_mirror = plain.unwrapped.layout.z_mirror
+        o1, i1 = plain.reset(seed=4, options={"target": pair[0]})
+        o2, i2 = mirror.reset(seed=4, options={"target": pair[1]})
+        assert not i1["start_mirrored"] and i2["start_mirrored"]
+        assert np.array_equal(o2, z_mirror(o1)) and not np.array_equal(o2, o1)
+        for a in actions(2, 4):
+            o1, r1, *_ = plain.step(a)
+            o2, r2, *_ = mirror.step(a * ACTION_Z_MIRROR)
+            assert np.array_equal(o2, z_mirror(o1)) and r1 == r2
+        plain.close()
+        mirror.close()
+
+
+def test_start_mirror_random_draws_from_np_random_and_is_checked(kw) -> None:
+    env = make(kw, start_mirror="random")
+    drawn = [env.reset(seed=s)[1]["start_mirrored"] for s in range(8)]
+    assert set(drawn) == {True, False}
+    assert drawn == [env.reset(seed=s)[1]["start_mirrored"] for s in range(8)]
+    env.close()
+    with pytest.raises(ValueError, match="start_mirror"):
+        make(kw, start_mirror="sometimes")

@@ -31,9 +31,9 @@ def test_the_mirror_average_is_equivariant_and_changes_the_action(n_stack) -> No
     d = 6
     signs = np.array([1, -1, 1, -1, 1, 1], dtype=np.float32)
     model = _Model(d * n_stack)
-    mirrored = SB3Policy(model, frame_stack=n_stack, mirror_signs=signs)
+    mirrored = SB3Policy(model, frame_stack=n_stack, mirror=lambda o: o * signs)
     plain = SB3Policy(model, frame_stack=n_stack)
-    twin = SB3Policy(model, frame_stack=n_stack, mirror_signs=signs)
+    twin = SB3Policy(model, frame_stack=n_stack, mirror=lambda o: o * signs)
     rng = np.random.default_rng(1)
     for p in (mirrored, plain, twin):
         p.reset(0)
@@ -52,9 +52,9 @@ def test_the_config_key_and_the_override_set_it() -> None:
 
     env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / "ppo_residual.yml"))
     env = gym.make("CNTDeposit-v0", **env_kwargs)
-    assert load_policy(AGENT, env=env).mirror_signs is None  # shipped: off
+    assert load_policy(AGENT, env=env).mirror is None  # shipped: off
     on = load_policy(AGENT, env=env, mirror_average=True)
-    assert np.array_equal(on.mirror_signs, env.unwrapped.layout.z_mirror_signs())
+    assert on.mirror == env.unwrapped.layout.z_mirror
     obs, _ = env.reset(seed=3)
     on.reset(3)
     off = load_policy(AGENT, env=env)
@@ -104,7 +104,7 @@ def test_a_residual_over_an_equivariant_base_is_equivariant(observe_base) -> Non
 
     def agent() -> SB3Policy:
         return SB3Policy(model, base=_EquivariantBase(), scale=0.8, observe_base=observe_base,
-                         mirror_signs=signs)  # fmt: skip
+                         mirror=lambda o: o * signs)  # fmt: skip
 
     a, b = agent(), agent()
     o = np.random.default_rng(2).normal(size=d).astype(np.float32)

@@ -47,31 +47,39 @@ def test_rod_features_interpolate_the_lean() -> None:
     assert rod_features(np.zeros((0, 3)), np.zeros(3), (2.0,)).tolist() == [0, 0, 0, 0, 0]
 
 
-@pytest.mark.parametrize("route", [False, True])
+@pytest.mark.parametrize("route", [None, "keepout", "none"])
 @pytest.mark.parametrize("window", [None, 6.0])
-def test_z_mirror_signs_give_the_observation_of_the_mirror_image(route, window) -> None:
+def test_z_mirror_gives_the_observation_of_the_mirror_image(route, window) -> None:
     """The observation of a state mirrored in z (every z -> -z: trace, target, flow, rod,
-    keep-out point) is the signs times the observation of the state."""
+    keep-out point) is ``z_mirror`` of the state's observation; the far point that stands
+    for no keep-out (the env's contact + FAR) stays the far point."""
+    from cnt_env.task.geometry import FAR
+
     rng = np.random.default_rng(3)
-    layout = ObservationLayout(5, 4, (2.0, 8.0, 3.5), route=route)
+    layout = ObservationLayout(5, 4, (2.0, 8.0, 3.5), route=route is not None)
     trace = np.column_stack([np.cumsum(rng.uniform(0.5, 1.5, 12)), np.zeros(12),
                              rng.normal(0.0, 3.0, 12)])  # fmt: skip
     nodes = np.column_stack([trace[-1, 0] + rng.normal(0, 1, 6), np.linspace(0.2, 12.0, 6),
                              trace[-1, 2] + rng.normal(0, 1, 6)])  # fmt: skip
     ahead = rng.normal(0.0, 20.0, (4, 2))
     flow = np.array([0.3, -0.6])
-    keep = np.array([15.0, *rng.normal(0.0, 10.0, 2)])
 
     def obs(z: float) -> np.ndarray:
         t, n = trace * [1.0, 1.0, z], nodes * [1.0, 1.0, z]
         rod = rod_features(n, t[-1], layout.lean_heights)
+        keep = None
+        if route == "keepout":
+            keep = np.array([15.0, 3.0, -8.0 * z])
+        elif route == "none":  # the env's nearest keep-out point when there is none
+            keep = np.array([15.0, *(t[-1, [0, 2]] + FAR)])
         return layout.build(t, ahead * [1.0, z], flow * [1.0, z], rod, np.arange(4.0) / 4,
-                            window, keep * [1.0, 1.0, z] if route else None)  # fmt: skip
+                            window, keep)  # fmt: skip
 
-    signs = layout.z_mirror_signs()
-    assert set(np.unique(signs)) == {-1.0, 1.0}
-    assert np.array_equal(obs(-1.0), signs * obs(1.0))
+    assert np.array_equal(obs(-1.0), layout.z_mirror(obs(1.0)))
+    assert np.array_equal(layout.z_mirror(layout.z_mirror(obs(1.0))), obs(1.0))
     assert not np.array_equal(obs(-1.0), obs(1.0))  # the mirror image is another state
+    with pytest.raises(ValueError, match="one observation"):
+        layout.z_mirror(obs(1.0)[None])
 
 
 def test_action_z_mirror_is_the_flows_mirror_image() -> None:

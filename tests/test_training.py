@@ -24,7 +24,8 @@ RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
 #: goes on training the shipped agent (cnt-train --trained-agent) on the calibrated surrogate
 SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
 #: second stages over the shipped agent's base: the calibrated surrogate, detours 3 in 10
-SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml")
+SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml",
+                 "ppo_residual_start_mirror_finetune.yml")  # fmt: skip
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)

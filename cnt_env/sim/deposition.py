@@ -679,6 +679,27 @@ class DepositionSim:
         self.immediate_deposits = snap["immediate_deposits"]
 
 
+def z_mirrored(snap: dict) -> dict:
+    """The mirror image in z (z -> -z) of a :meth:`DepositionSim.snapshot`, for the same
+    configuration: a state of the same simulator, which lays the mirrored trace under the
+    mirrored flow (phi -> -phi; both substrates, the rod and the drag are symmetric under
+    it; tests/test_deposition.py). The reflection is improper, so the twist angles change
+    sign with the z components: theta (the material frame's angle from the reference
+    director d1, with d2 = t x d1) and the reference twist; a DOF's generalised force,
+    velocity and anchor follow its coordinate."""
+    rod = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in snap["rod"].items()}
+    for key in ("q", "u", "ext_force", "sub_anchor"):  # (x, y, z, theta) per node
+        dof = rod[key].reshape(-1, 4)
+        dof[:, 2:] *= -1.0
+    for key in ("tangents_old", "d1_old"):
+        rod[key][:, 2] *= -1.0
+    rod["flow"][2] *= -1.0
+    rod["ref_twist_old"] *= -1.0
+    trace = snap["trace"].copy()
+    trace[:, 2] *= -1.0
+    return {**snap, "rod": rod, "trace": trace, "snapped": snap["snapped"].copy()}
+
+
 def initial_shape(
     height: float,
     radius: float,

@@ -21,7 +21,7 @@ from gymnasium import spaces
 
 from cnt_env import MAX_EPISODE_STEPS
 from cnt_env.presets import MODEL
-from cnt_env.sim.deposition import DepositionSim
+from cnt_env.sim.deposition import DepositionSim, z_mirrored
 from cnt_env.sim.forces import DRAG_LAWS
 from cnt_env.sim.stepper import SimulationError
 from cnt_env.sim.warmstart import flatten_snapshot, unflatten_snapshot, warm_state
@@ -63,6 +63,8 @@ CONTROL_INTERVAL_HBAR = {"thin": 1.5, "corridor": 30.0}
 #: about the 60 L_vb whose mean is the pattern's centre.
 ROUTE_TRACE_WINDOW = 64.0
 SCORES = ("corridor", "thin")
+#: ``start_mirror``: whether an episode starts from the warm state's mirror image in z.
+START_MIRROR = ("never", "always", "random")
 #: Episode length registered with ``max_episode_steps`` (TimeLimit; its one home is
 #: cnt_env/__init__.py): ~400 L_vb of trace, about 4 periods of the baseline serpentine
 #: (benchmarks/env_throughput.py --baseline: amplitude ~24, wavelength ~7.7, ~95 L_vb of
@@ -180,7 +182,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     A warm state per configuration (the simulator after ``warmup_length`` L_vb of trace
     with the configured flow ``vbar``, ``phi``), computed once, cached on disk
     (``cache_dir``, ``$CNT_ENV_CACHE_DIR`` or the user cache) and restored exactly at every
-    reset; then a random advance in [0, ``reset_advance`` · ``control_interval``). The
+    reset (with ``start_mirror``, its mirror image in z under the mirrored flow;
+    ``info["start_mirrored"]``); then a random advance in [0, ``reset_advance`` ·
+    ``control_interval``). The
     target is placed at the contact point: drawn from ``families`` at ``difficulty`` with
     ``np_random`` (or, with ``route_file``, one of that file's routes, uniformly), or
     ``reset(options={"target": ...})``: a family or held-out name, a
@@ -225,6 +229,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `warmup_length`    | H̄            | trace laid to reach the warm state (L_vb)       |
     | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
     | `reset_advance`    | 4.0          | max random advance at reset (control intervals) |
+    | `start_mirror`     | "never"      | start from the warm state's mirror image in z   |
+    |                    |              | (and its flow, phi -> -phi): "never", "always"  |
+    |                    |              | or "random" (half the resets, np_random)        |
     | `score`            | "corridor"   | "corridor" (routes) or "thin" (v0 polylines)    |
     | `route_width`      | 18.5         | corridor half-width of bare polylines (L_vb)    |
     | `difficulty`       | 0.5          | route length, turns, narrowness, in [0, 1]; or  |
@@ -308,6 +315,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         warmup_length: float | None = None,
         warmup_seed: int = 0,
         reset_advance: float = 4.0,
+        start_mirror: str = "never",
         tolerance: float = 2.0,
         n_trace_points: int = 16,
         n_target_points: int = 16,
@@ -354,6 +362,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         )
         self.warmup_seed = s.seed("warmup_seed", warmup_seed)
         self.reset_advance = s.non_negative("reset_advance", reset_advance)
+        self.start_mirror = s.choice("start_mirror", start_mirror, START_MIRROR)
         self.tolerance = s.positive("tolerance", tolerance)
         self.target_spacing = s.positive("target_spacing", target_spacing)
         self.weights = np.array([s.non_negative("coverage_weight", coverage_weight),
@@ -474,14 +483,21 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         advance = (
             float(self.np_random.uniform(0.0, 1.0)) * self.reset_advance * self.control_interval
         )
-        sim.restore(unflatten_snapshot(self._warm))
+        mirrored = self.start_mirror == "always" or (
+            self.start_mirror == "random" and bool(self.np_random.integers(2))
+        )  # drawn only for "random": the other settings' streams are unchanged
+        warm = unflatten_snapshot(self._warm)
+        if mirrored:  # the mirror image in z, an exact symmetry of the simulator
+            warm = z_mirrored(warm)
+        sim.restore(warm)
         if advance > 0.0:
             try:
                 sim.advance(advance)
             except SimulationError:
-                sim.restore(unflatten_snapshot(self._warm))  # start from the warm state itself
+                sim.restore(warm)  # start from the warm state itself
                 advance = 0.0
-        self._flow = (self.params.vbar / self.flow_gain, self.params.phi)  # as commanded
+        phi = -self.params.phi if mirrored else self.params.phi
+        self._flow = (self.params.vbar / self.flow_gain, phi)  # as commanded
         self._begin_episode(target)
         trace = sim.trace()
         metrics = self._last_metrics = self._metrics(trace)
@@ -489,6 +505,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         obs = self._observation(trace, metrics)
         info = self._info(metrics, dict.fromkeys(self._reward_keys, 0.0), 0, 0)
         info["reset_advance"] = advance
+        info["start_mirrored"] = mirrored
         if self.render_mode == "human":
             self.render()
         return obs, info

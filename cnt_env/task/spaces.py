@@ -172,14 +172,28 @@ class ObservationLayout:
     def space(self) -> spaces.Box:
         return spaces.Box(self.low, self.high, dtype=np.float32)
 
-    def z_mirror_signs(self) -> np.ndarray:
-        """Signs (+-1, float32) that map an observation to the one of its mirror image in
-        z (z -> -z): every z offset changes sign (trace and target points, the flow's z,
-        the contact edge's and the lean's z, the nearest keep-out point's z); heights,
-        progress values and the corridor's width do not. The simulator is symmetric under
-        it to the last bit (both substrates, the rod, the drag; tests/test_deposition.py),
-        so the mirror image of a state is a state of the same env; but every episode
-        starts from one warm state, which is not its own mirror image."""
+    def z_mirror(self, obs: np.ndarray) -> np.ndarray:
+        """The observation (float32) of the mirror image in z (z -> -z) of the state
+        ``obs`` (d,) observes: every z offset changes sign (trace and target points, the
+        flow's z, the contact edge's and the lean's z, the nearest keep-out point's z);
+        heights, progress values and the corridor's width do not, nor does the point that
+        stands for no keep-out (both its offsets at the position bound). The simulator is
+        symmetric under it to the last bit (both substrates, the rod, the drag), and so is
+        the env with ``start_mirror`` (tests/test_env.py): this is the observation of the
+        mirrored episode."""
+        obs = np.asarray(obs, dtype=np.float32)
+        if obs.shape != (self.size,):
+            raise ValueError(f"z_mirror needs one observation of shape ({self.size},), "
+                             f"got {obs.shape}")  # fmt: skip
+        out = obs * self._z_signs
+        if self.route:
+            k = self.slices["route"].start + 1  # w, keep-out (x, z)
+            if obs[k] >= POSITION_BOUND and obs[k + 1] >= POSITION_BOUND:
+                out[k + 1] = obs[k + 1]  # no keep-out: the far point stays where it is
+        return out
+
+    @property
+    def _z_signs(self) -> np.ndarray:
         signs = np.ones(self.size, dtype=np.float32)
         sl = self.slices
         for name in ("trace", "target", "flow"):
@@ -187,7 +201,7 @@ class ObservationLayout:
         rod = sl["rod"]  # height, edge (x, z), lean (x, z) per height
         signs[rod.start + 2 : rod.stop : 2] = -1.0
         if self.route:
-            signs[sl["route"].start + 2] = -1.0  # w, keep-out (x, z)
+            signs[sl["route"].start + 2] = -1.0
         return signs
 
     def build(self, trace: np.ndarray, ahead: np.ndarray, flow_xz: np.ndarray,
