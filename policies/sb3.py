@@ -338,7 +338,7 @@ class SB3Policy:
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
         a = self._model_action(o, mirrored=False)
         if self.mirror is not None:
-            om = self.mirror(np.asarray(obs, dtype=np.float32))
+            om = self.mirror(obs)
             if self.observe_base:
                 om = observe(om, b * ACTION_Z_MIRROR)
             mirrored = self._model_action(om, mirrored=True) * ACTION_Z_MIRROR
@@ -441,7 +441,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
     ``mirror_average`` overrides the config's (the residual's ``mirror_average``, default
     false): the model's action averaged with its action for the observation's mirror
     image in z, mirrored back (:class:`SB3Policy`; needs ``env``, whose observation layout
-    gives the signs).
+    gives the mirror image, ``ObservationLayout.z_mirror``).
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""

@@ -131,6 +131,8 @@ class ObservationLayout:
     slices: dict[str, slice] = field(init=False)
     low: np.ndarray = field(init=False, repr=False)
     high: np.ndarray = field(init=False, repr=False)
+    #: signs of :meth:`z_mirror` (+-1, float32): -1 on every z offset
+    z_signs: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         k, m = self.n_trace_points, self.n_target_points
@@ -148,6 +150,7 @@ class ObservationLayout:
         low, high = self._bounds(start)
         object.__setattr__(self, "low", low)
         object.__setattr__(self, "high", high)
+        object.__setattr__(self, "z_signs", self._z_mirror_signs())
 
     @property
     def size(self) -> int:
@@ -185,15 +188,14 @@ class ObservationLayout:
         if obs.shape != (self.size,):
             raise ValueError(f"z_mirror needs one observation of shape ({self.size},), "
                              f"got {obs.shape}")  # fmt: skip
-        out = obs * self._z_signs
+        out = obs * self.z_signs
         if self.route:
             k = self.slices["route"].start + 1  # w, keep-out (x, z)
             if obs[k] >= POSITION_BOUND and obs[k + 1] >= POSITION_BOUND:
                 out[k + 1] = obs[k + 1]  # no keep-out: the far point stays where it is
         return out
 
-    @property
-    def _z_signs(self) -> np.ndarray:
+    def _z_mirror_signs(self) -> np.ndarray:
         signs = np.ones(self.size, dtype=np.float32)
         sl = self.slices
         for name in ("trace", "target", "flow"):
