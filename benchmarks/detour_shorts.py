@@ -133,13 +133,15 @@ def first_heading(waypoints: np.ndarray) -> str:
 
 def summary(rows: list[dict[str, Any]]) -> list[str]:
     """Per policy: the mean score and the routes shorted, over all and per first heading."""
+    from policies.opening import AXES
+
     lines = []
     for p in dict.fromkeys(r["policy"] for r in rows):
         rs = [r for r in rows if r["policy"] == p]
         shorted = [r["seed"] for r in rs if r["shorts"] > 0]
         lines.append(f"{p}: mean {statistics.fmean(r['score'] for r in rs):.3f} over "
                      f"{len(rs)} routes, {len(shorted)} shorted {shorted}")  # fmt: skip
-        for h in ("+x", "-x", "+z", "-z"):
+        for h in AXES:
             hs = [r for r in rs if r.get("heading") == h]
             if hs:
                 at = [(r["seed"], r["first_short_step"], round(r["progress_at_short"], 2))

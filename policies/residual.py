@@ -162,14 +162,13 @@ class HeadingGate:
 
 def has_keepout(obs: np.ndarray, slices: dict[str, slice]) -> bool:
     """Whether the observation's route has a keep-out: its nearest keep-out point (the last
-    two values of the ``route`` slice) is not the far point that stands for none, clipped
-    to the position bound (cnt_env/task/spaces.py ``POSITION_BOUND``, 1000 L_vb)."""
-    from cnt_env.task.spaces import POSITION_BOUND
+    two values of the ``route`` slice) is in view (cnt_env/task/spaces.py
+    ``keepout_in_view``), not the far point that stands for none."""
+    from cnt_env.task.spaces import keepout_in_view
 
     if "route" not in slices:
         return False
-    kx, kz = (float(v) for v in obs[slices["route"]][1:3])
-    return max(abs(kx), abs(kz)) < POSITION_BOUND
+    return keepout_in_view(*(float(v) for v in obs[slices["route"]][1:3]))
 
 
 def observe(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from cnt_env.task.spaces import ObservationLayout, action_from_flow, flow_from_action, rod_features
+from cnt_env.task.spaces import (
+    POSITION_BOUND,
+    ObservationLayout,
+    action_from_flow,
+    flow_from_action,
+    keepout_in_view,
+    rod_features,
+)
 
 
 @pytest.mark.parametrize("a", [(-1, -1), (1, 1), (1, 0), (0, -1), (0.3, -0.7), (0, 0)])
@@ -80,6 +87,22 @@ def test_z_mirror_gives_the_observation_of_the_mirror_image(route, window) -> No
     assert not np.array_equal(obs(-1.0), obs(1.0))  # the mirror image is another state
     with pytest.raises(ValueError, match="one observation"):
         layout.z_mirror(obs(1.0)[None])
+
+
+def test_keepout_in_view_reads_the_bound_as_none() -> None:
+    """One test of "no keep-out" for the gate and the z-mirror: the far point the env writes
+    (clipped to the bound in both offsets) and a point at the bound in either offset are
+    none; anything inside the bound is a keep-out, and z_mirror flips only those."""
+    b = POSITION_BOUND
+    assert keepout_in_view(999.0, -999.0) and keepout_in_view(0.0, 0.0)
+    for far in ((b, b), (b, 5.0), (5.0, -b), (-b, -b)):
+        assert not keepout_in_view(*far)
+    layout = ObservationLayout(5, 4, (2.0, 8.0), route=True)
+    k = layout.slices["route"].start + 1
+    for point, mirrored in (((b, b), (b, b)), ((b, 5.0), (b, 5.0)), ((12.0, 5.0), (12.0, -5.0))):
+        obs = np.zeros(layout.size, dtype=np.float32)
+        obs[k : k + 2] = point
+        assert layout.z_mirror(obs)[k : k + 2].tolist() == list(mirrored)
 
 
 def test_action_z_mirror_is_the_flows_mirror_image() -> None:

@@ -26,18 +26,29 @@ __all__ = [
     "ObservationLayout",
     "action_from_flow",
     "flow_from_action",
+    "keepout_in_view",
     "rod_features",
     "trace_points",
 ]
 
 #: Bound (L_vb) of every position in the vector observation; values are clipped to it.
 POSITION_BOUND = 1000.0
+
 #: Bound of the laid-length / target-length ratio in the observation.
 LAID_RATIO_BOUND = 100.0
 #: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
 #: near the contact, where the next trace is shaped, and fractions of Hbar.
 LEAN_HEIGHTS = (2.0, 8.0)
 LEAN_HEIGHT_FRACTIONS = (0.5, 1.0)
+
+
+def keepout_in_view(kx: float, kz: float) -> bool:
+    """Whether an observed nearest keep-out point (kx, kz) (offsets from the contact, L_vb)
+    is a keep-out. A route without one is observed at the far point (geometry.FAR in both
+    offsets, clipped to (POSITION_BOUND, POSITION_BOUND)); a point at the bound in either
+    offset, a keep-out at least 1000 L_vb away, reads as none too. The one test of it, for
+    the keep-out gate (policies/residual.py) and the z-mirror (which keeps the far point)."""
+    return max(abs(kx), abs(kz)) < POSITION_BOUND
 
 
 def flow_from_action(action: np.ndarray, vbar_max: float) -> tuple[float, float]:
@@ -180,7 +191,7 @@ class ObservationLayout:
         ``obs`` (d,) observes: every z offset changes sign (trace and target points, the
         flow's z, the contact edge's and the lean's z, the nearest keep-out point's z);
         heights, progress values and the corridor's width do not, nor does the point that
-        stands for no keep-out (both its offsets at the position bound). The simulator is
+        stands for no keep-out (:func:`keepout_in_view`). The simulator is
         symmetric under it to the last bit (both substrates, the rod, the drag), and so is
         the env with ``start_mirror`` (tests/test_env.py): this is the observation of the
         mirrored episode."""
@@ -191,7 +202,7 @@ class ObservationLayout:
         out = obs * self.z_signs
         if self.route:
             k = self.slices["route"].start + 1  # w, keep-out (x, z)
-            if obs[k] >= POSITION_BOUND and obs[k + 1] >= POSITION_BOUND:
+            if not keepout_in_view(obs[k], obs[k + 1]):
                 out[k + 1] = obs[k + 1]  # no keep-out: the far point stays where it is
         return out
 
