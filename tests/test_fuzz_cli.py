@@ -141,25 +141,30 @@ def _call(argv: list[str]) -> tuple[int, str, str, tuple[float, float]]:
     return code, out.getvalue(), err.getvalue(), seconds
 
 
-def _workdir() -> tuple[Path, dict[str, Path]]:
-    """A fresh folder with the hostile paths an output flag may name."""
+@contextlib.contextmanager
+def _workdir() -> Iterator[tuple[Path, dict[str, Path]]]:
+    """A fresh folder with the hostile paths an output flag may name, removed on exit,
+    also when hypothesis stops an example in a draw (which used to leave it behind)."""
     root = Path(tempfile.mkdtemp(prefix="fuzz-"))
-    (root / "dir").mkdir()
-    (root / "keep.txt").write_text("keep")
-    (root / "link.npz").symlink_to(root / "keep.txt")
-    (root / "dangling.png").symlink_to(root / "nowhere")
-    os.mkfifo(root / "fifo")
-    named = {
-        "new": root / "out.npz",
-        "nested": root / "sub" / "deeper" / "o.png",
-        "dir": root / "dir",
-        "link": root / "link.npz",
-        "dangling": root / "dangling.png",
-        "fifo": root / "fifo",
-        "long": root / ("n" * 300),
-        "keep": root / "keep.txt",
-    }
-    return root, named
+    try:
+        (root / "dir").mkdir()
+        (root / "keep.txt").write_text("keep")
+        (root / "link.npz").symlink_to(root / "keep.txt")
+        (root / "dangling.png").symlink_to(root / "nowhere")
+        os.mkfifo(root / "fifo")
+        named = {
+            "new": root / "out.npz",
+            "nested": root / "sub" / "deeper" / "o.png",
+            "dir": root / "dir",
+            "link": root / "link.npz",
+            "dangling": root / "dangling.png",
+            "fifo": root / "fifo",
+            "long": root / ("n" * 300),
+            "keep": root / "keep.txt",
+        }
+        yield root, named
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
 
 
 def _check_outcome(code: int, stdout: str, stderr: str, seconds: tuple[float, float]) -> None:
@@ -263,13 +268,6 @@ def _relative(root: Path, argv: list[str]) -> set[str]:
     return found
 
 
-def _run_example(argv: list[str], root: Path) -> None:
-    try:
-        _check_example(argv, root)
-    finally:
-        shutil.rmtree(root, ignore_errors=True)
-
-
 def _check_example(argv: list[str], root: Path) -> None:
     before = _snapshot(root)
     for special in ("/dev/null", "/dev/full"):
@@ -283,8 +281,8 @@ def _check_example(argv: list[str], root: Path) -> None:
 
 
 def _fuzz_run(data: st.DataObject) -> None:
-    root, named = _workdir()
-    _run_example(data.draw(run_argv(named)), root)
+    with _workdir() as (root, named):
+        _check_example(data.draw(run_argv(named)), root)
 
 
 # --------------------------------------------------------------------------- files
@@ -339,21 +337,21 @@ def trace_file(draw: Any, good: bytes) -> bytes | dict:
 
 
 def _fuzz_measure(data: st.DataObject, good: bytes) -> None:
-    root, named = _workdir()
-    content = data.draw(trace_file(good))
-    path = root / "in.npz"
-    if isinstance(content, dict):
-        np.savez(path, **content)
-    else:
-        path.write_bytes(content)
-    argv = ["measure", str(path)]
-    if data.draw(st.booleans()):
-        argv.append(f"--transient={data.draw(TEXT_VALUES)}")
-    if data.draw(st.booleans()):
-        argv.append(f"--png={named[data.draw(PATH_KEYS)]}")
-    if data.draw(st.booleans()):
-        argv.append("--json")
-    _run_example(argv, root)
+    with _workdir() as (root, named):
+        content = data.draw(trace_file(good))
+        path = root / "in.npz"
+        if isinstance(content, dict):
+            np.savez(path, **content)
+        else:
+            path.write_bytes(content)
+        argv = ["measure", str(path)]
+        if data.draw(st.booleans()):
+            argv.append(f"--transient={data.draw(TEXT_VALUES)}")
+        if data.draw(st.booleans()):
+            argv.append(f"--png={named[data.draw(PATH_KEYS)]}")
+        if data.draw(st.booleans()):
+            argv.append("--json")
+        _check_example(argv, root)
 
 
 # --------------------------------------------------------------------------- sweep
@@ -384,37 +382,37 @@ CSV_CONTENT = st.one_of(
 
 
 def _fuzz_sweep(data: st.DataObject) -> None:
-    root, named = _workdir()
-    argv = ["sweep", "--Hbar=30", "--deposit=3", "--no-plots" if data.draw(st.booleans())
-            else f"--plots={root / 'plots'}", "--json"]  # fmt: skip
-    argv.append(f"--param={data.draw(PARAMS)}")
-    if data.draw(st.booleans()):
-        argv.append(f"--values={data.draw(VALUES)}")
-    else:
-        argv.append(f"--range={data.draw(RANGES)}")
-    if data.draw(st.booleans()):
-        argv += [f"--param2={data.draw(PARAMS)}", f"--values2={data.draw(VALUES)}"]
-    for flag in data.draw(st.lists(st.sampled_from(["--repeats", "--jobs", "--seed",
-                                                    "--max-points"]), max_size=2)):  # fmt: skip
-        argv.append(f"{flag}={data.draw(INT_VALUES)}")
-    for flag in data.draw(st.lists(st.sampled_from(RUN_FLOAT_FLAGS[:9]), max_size=2)):
-        argv.append(f"{flag}={data.draw(TEXT_VALUES)}")
-    if data.draw(st.booleans()):
-        argv.append(f"--backend={data.draw(st.sampled_from(['local', 'ray', 'x']))}")
-    choice = data.draw(st.integers(0, 3))
-    if choice == 0:
-        out = root / "s.csv"
-        out.write_bytes(data.draw(CSV_CONTENT))
-    elif choice == 1:
-        out = named[data.draw(PATH_KEYS)]
-    elif choice == 2:
-        out = Path(data.draw(SPECIAL) or "/proc/x.csv")
-    else:
-        out = root / "new.csv"
-    argv.append(f"--out={out}")
-    # bounded sweep size: a drawn --max-points (up to 1e9) is refused over
-    # sweep.MAX_POINTS_CEILING before any grid is built
-    _run_example(argv, root)
+    with _workdir() as (root, named):
+        argv = ["sweep", "--Hbar=30", "--deposit=3", "--no-plots" if data.draw(st.booleans())
+                else f"--plots={root / 'plots'}", "--json"]  # fmt: skip
+        argv.append(f"--param={data.draw(PARAMS)}")
+        if data.draw(st.booleans()):
+            argv.append(f"--values={data.draw(VALUES)}")
+        else:
+            argv.append(f"--range={data.draw(RANGES)}")
+        if data.draw(st.booleans()):
+            argv += [f"--param2={data.draw(PARAMS)}", f"--values2={data.draw(VALUES)}"]
+        for flag in data.draw(st.lists(st.sampled_from(["--repeats", "--jobs", "--seed",
+                                                        "--max-points"]), max_size=2)):  # fmt: skip
+            argv.append(f"{flag}={data.draw(INT_VALUES)}")
+        for flag in data.draw(st.lists(st.sampled_from(RUN_FLOAT_FLAGS[:9]), max_size=2)):
+            argv.append(f"{flag}={data.draw(TEXT_VALUES)}")
+        if data.draw(st.booleans()):
+            argv.append(f"--backend={data.draw(st.sampled_from(['local', 'ray', 'x']))}")
+        choice = data.draw(st.integers(0, 3))
+        if choice == 0:
+            out = root / "s.csv"
+            out.write_bytes(data.draw(CSV_CONTENT))
+        elif choice == 1:
+            out = named[data.draw(PATH_KEYS)]
+        elif choice == 2:
+            out = Path(data.draw(SPECIAL) or "/proc/x.csv")
+        else:
+            out = root / "new.csv"
+        argv.append(f"--out={out}")
+        # bounded sweep size: a drawn --max-points (up to 1e9) is refused over
+        # sweep.MAX_POINTS_CEILING before any grid is built
+        _check_example(argv, root)
 
 
 # --------------------------------------------------------------------------- tests
