@@ -33,7 +33,6 @@ __all__ = [
 
 #: Bound (L_vb) of every position in the vector observation; values are clipped to it.
 POSITION_BOUND = 1000.0
-
 #: Bound of the laid-length / target-length ratio in the observation.
 LAID_RATIO_BOUND = 100.0
 #: Heights (L_vb) at which the lean of the suspended rod is observed: two absolute ones
@@ -214,7 +213,7 @@ class ObservationLayout:
         rod = sl["rod"]  # height, edge (x, z), lean (x, z) per height
         signs[rod.start + 2 : rod.stop : 2] = -1.0
         if self.route:
-            signs[sl["route"].start + 2] = -1.0
+            signs[sl["route"].start + 2] = -1.0  # w, keep-out (x, z)
         return signs
 
     def build(self, trace: np.ndarray, ahead: np.ndarray, flow_xz: np.ndarray,
