@@ -11,7 +11,8 @@ keep-out whose first leg runs along -z is handed to the follower, policies/resid
 ``HeadingGate``); the agent without them (``ungated``); and the shield, the ungated agent
 with its residual dropped (its base's action played) while the nearest keep-out point is
 within ``--shield`` L_vb of the contact point (a probe of a safety shield); ``base``, the
-agent's base alone (the follower with the options the agent's config pins).
+agent's base alone (the follower with the options the agent's config pins). ``--agent``
+plays another residual agent in their place (a cnt-train model, e.g. an unshipped run's).
 Rows written before the gate was shipped (2026-12-06) have the ungated agent as "ungated".
 
     python benchmarks/detour_shorts.py --first 1000 --count 124 \
@@ -21,9 +22,13 @@ Rows written before the gate was shipped (2026-12-06) have the ungated agent as 
         --out benchmarks/results/detour_shorts_surrogate.jsonl
     python benchmarks/detour_shorts.py --first 2000 --count 100 --family any --heading=-z \
         --policies follower,ungated --out benchmarks/results/minus_z_starts.jsonl
+    python benchmarks/detour_shorts.py --first 6000 --count 400 --heading=+z \
+        --policies follower,ungated --out benchmarks/results/plus_z_detours.jsonl
 
 (and ``--family detour --heading=-z --policies agent`` or ``base`` on each, into
-``*_agent.jsonl`` and ``*_base.jsonl``: benchmarks/RESULTS.md, issue 10, "Drawn detours")
+``*_agent.jsonl`` and ``*_base.jsonl``: benchmarks/RESULTS.md, issue 10, "Drawn detours";
+the last with ``--policies ungated --agent MODEL.zip`` for unshipped agents, into
+``plus_z_detours_<name>.jsonl``: "Mirrored starts in the first stage only")
 
 writes one JSON line per episode to ``--out`` (default
 ``benchmarks/results/detour_shorts.jsonl``) and prints the mean score and the routes
@@ -84,12 +89,13 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     env = _env(job.get("config"))
     obs, info = env.reset(seed=job["seed"])
     route = env.unwrapped.observation_slices["route"]
+    agent = job.get("agent") or AGENT
     if job["policy"] == "follower":
         policy = RouteFollower.from_env(env)
     elif job["policy"] == "agent":  # as shipped: its config's keepout_headings
-        policy = load_policy(AGENT, env=env)
+        policy = load_policy(agent, env=env)
     else:  # ungated, shield, base: the agent without them
-        policy = load_policy(AGENT, env=env, keepout_headings=())
+        policy = load_policy(agent, env=env, keepout_headings=())
         if job["policy"] == "base":  # its base alone, with the options its config pins
             policy = policy.base
     policy.reset(job["seed"])
@@ -115,7 +121,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     heading = first_heading(env.unwrapped.target.waypoints)
     env.close()
     return {"seed": job["seed"], "route": str(info["target"]), "policy": job["policy"],
-            "config": job.get("config"), "heading": heading,
+            "config": job.get("config"), "agent": job.get("agent"), "heading": heading,
             "shield": job.get("shield"), "score": float(info["score"]),
             "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded,
             "first_short_step": first_short and first_short[0],
@@ -170,6 +176,10 @@ def main(argv: list[str] | None = None) -> int:
         "training/configs/eval.yml, the model; the agent's own, "
         "policies/pretrained/ppo_residual.yml, is the surrogate it trained on)",
     )
+    ap.add_argument("--agent", type=Path,
+                    help="the residual agent (a cnt-train .zip with its .yml) that plays "
+                    "agent, ungated, shield and base (default: the shipped one, "
+                    "policies/pretrained/ppo_residual.zip)")  # fmt: skip
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--summarize", type=Path, nargs="+", metavar="JSONL",
                     help="print the summary of files this wrote, and run nothing")  # fmt: skip
@@ -189,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
             f"--config {args.config}: no such file (a training config, e.g. "
             "policies/pretrained/ppo_residual.yml)"
         )
+    if args.agent is not None and not args.agent.is_file():
+        ap.error(f"--agent {args.agent}: no such file (a model saved by cnt-train, .zip)")
     rows: list[dict[str, Any]] = []
     args.out.write_text("")  # a fresh file per run; rows are appended as episodes end
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
@@ -201,8 +213,10 @@ def main(argv: list[str] | None = None) -> int:
                   args.heading else "") + f" in reset seeds {drawn[0]}-{drawn[-1]}",
                   file=sys.stderr)  # fmt: skip
             return 1
+        agent = None if args.agent is None else str(args.agent)
         jobs = [{"seed": s, "policy": p, "shield": args.shield if p == "shield" else None,
-                 "config": args.config} for s in seeds for p in args.policies]  # fmt: skip
+                 "config": args.config, "agent": agent}
+                for s in seeds for p in args.policies]  # fmt: skip
         for row in pool.map(episode, jobs):
             rows.append(row)
             append_row(args.out, row, echo=True)

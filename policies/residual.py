@@ -119,7 +119,10 @@ class HeadingGate:
     detours whose first leg runs down the steps' axis (-z), where the follower does not
     (12 of 19 against 1 over three sets: two on the model, one on the surrogate it was
     trained on), while on routes without a keep-out that start along -z it is ahead of the
-    follower (benchmarks/RESULTS.md, issue 10, "Drawn detours")."""
+    follower (benchmarks/RESULTS.md, issue 10, "Drawn detours"). An agent whose first
+    stage drew mirrored starts (``start_mirror``; one run) shorts the mirror images,
+    detours that start along +z (5-6 of 14 against the follower's 0), and needs
+    ``["-z", "+z"]`` (same file, "Mirrored starts in the first stage only")."""
 
     def __init__(self, headings: Any, slices: dict[str, slice], env: Any = None) -> None:
         from .opening import AXES

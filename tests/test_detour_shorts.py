@@ -15,6 +15,7 @@ from benchmarks import detour_shorts  # the repo root is on pytest's pythonpath
         ["--count", "0"],
         ["--first", "-1"],
         ["--config", "no/such/config.yml"],
+        ["--agent", "no/such/agent.zip"],
     ],
 )
 def test_bad_arguments_exit_with_a_usage_error(argv: list[str]) -> None:

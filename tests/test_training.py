@@ -26,7 +26,8 @@ SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
 #: second stages over the shipped agent's base: the calibrated surrogate, detours 3 in 10
 SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml",
                  "ppo_residual_start_mirror_finetune.yml",
-                 "ppo_residual_detour_mirror_finetune.yml")  # fmt: skip
+                 "ppo_residual_detour_mirror_finetune.yml",
+                 "ppo_residual_detour_symgate_finetune.yml")  # fmt: skip
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
