@@ -114,8 +114,7 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
             action = policy.act(obs)
         obs, _, term, trunc, info = env.step(action)
         steps += 1
-        if first_short is None and info["shorts"] > 0:
-            first_short = (steps, float(info["progress"]))
+        first_short = short_onset(first_short, steps, info)
         if term or trunc:
             break
     heading = first_heading(env.unwrapped.target.waypoints)
@@ -126,6 +125,16 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
             "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded,
             "first_short_step": first_short and first_short[0],
             "progress_at_short": first_short and first_short[1]}  # fmt: skip
+
+
+def short_onset(onset: tuple[int, float] | None, step: int, info: dict) -> tuple[int, float] | None:
+    """(control step, progress G) where the episode's final run of steps with shorts began,
+    updated after ``step``. ``info["shorts"]`` counts the unfrozen tail too, so a touch that
+    the tail lifts off again is forgotten: only a short that lasts to the end has an onset
+    (before 2026-12-06 the first touch was kept, e.g. seed 6189 in plus_z_detours.jsonl)."""
+    if info["shorts"] == 0:
+        return None
+    return onset if onset is not None else (step, float(info["progress"]))
 
 
 def first_heading(waypoints: np.ndarray) -> str:

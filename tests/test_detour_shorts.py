@@ -60,3 +60,16 @@ def test_summarize_prints_a_file_again(tmp_path, capsys) -> None:
     f.write_text('{"policy": "follower", "seed": 7, "heading": "+z", "score": 0.5, "shorts": 0}\n')
     assert detour_shorts.main(["--summarize", str(f)]) == 0
     assert capsys.readouterr().out.startswith("follower: mean 0.500 over 1 routes, 0 shorted []")
+
+
+def test_short_onset_is_where_the_final_run_of_shorts_began() -> None:
+    onset = None
+    for step, (shorts, progress) in enumerate(
+        [(0, 0.1), (1, 0.2), (0, 0.3), (0, 0.4), (2, 0.5), (3, 0.6)], start=1
+    ):
+        onset = detour_shorts.short_onset(onset, step, {"shorts": shorts, "progress": progress})
+        if step == 2:  # the first touch
+            assert onset == (2, 0.2)
+        if step == 3:  # the tail lifted off again: no short so far
+            assert onset is None
+    assert onset == (5, 0.5)
