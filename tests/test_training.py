@@ -1080,3 +1080,83 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
             two_stage_main(["--stage1", str(cfg1), "--stage2", str(cfg2), *argv,
                             "--out", str(tmp_path / "cli")])  # fmt: skip
         assert stop.value.code == 2 and not (tmp_path / "cli").exists()
+
+
+ROUTE_RUNS = Path(__file__).resolve().parents[1] / "training" / "results" / "route_runs"
+SHIPPED_NOTE = "the shipped agent's base (policies/pretrained/ppo_residual.yml)"
+
+
+@pytest.mark.parametrize(
+    ("run", "name", "mirror_average"),
+    [("mirror_hour", "mh_final", False), ("mirror_stage1", "ms_final_avg", True)],
+)
+def test_candidate_config_rebuilds_the_committed_candidates_to_the_byte(
+    run: str, name: str, mirror_average: bool
+) -> None:
+    """training.candidate: a run's config over the shipped agent's base and gate is the
+    model config that run's drive.sh wrote inline (while the shipped config is the one
+    they were made with)."""
+    from training.candidate import candidate_config
+
+    d = ROUTE_RUNS / run
+    text = candidate_config(
+        yaml.safe_load((d / "config.yml").read_text()),
+        yaml.safe_load((PRETRAINED_DIR / "ppo_residual.yml").read_text()),
+        SHIPPED_NOTE,
+        mirror_average,
+    )
+    assert text == (d / "model" / f"{name}.yml").read_text()
+
+
+def test_make_candidate_copies_the_model_sets_the_options_and_rewrites_the_manifest(
+    tmp_path: Path,
+) -> None:
+    from policies.sb3 import check_manifest
+    from training.candidate import main as candidate_main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = yaml.safe_load((ROUTE_RUNS / "mirror_stage1" / "config.yml").read_text())
+    (run / "ppo.yml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    for suffix, data in ((".zip", b"net"), ("_vecnormalize.npz", b"npz"),
+                         ("_vecnormalize.json", b"{}")):  # fmt: skip
+        (run / f"ppo{suffix}").write_bytes(data)
+    out = tmp_path / "models"
+    argv = [str(run / "ppo.zip"), "--like", str(PRETRAINED_DIR / "ppo_residual.yml"),
+            "--out", str(out), "--keepout-headings=-z,+z"]  # fmt: skip
+    assert candidate_main([*argv, "--name", "a"]) == 0
+    assert candidate_main([*argv, "--name", "b", "--mirror-average"]) == 0
+    assert (out / "a.zip").read_bytes() == b"net"
+    assert (out / "b_vecnormalize.npz").read_bytes() == b"npz"
+    wrap = {}
+    for n in ("a", "b"):
+        c = yaml.safe_load((out / f"{n}.yml").read_text())
+        wrap[n] = c["CNTDeposit-v0"]["env_wrapper"][0]["training.common.ResidualAction"]
+        assert wrap[n]["keepout_headings"] == ["-z", "+z"]
+        assert c["run"]["base_set_after_training"].endswith("gate [-z, +z]")
+        assert check_manifest(out / f"{n}.zip")  # both candidates listed
+    shipped = yaml.safe_load((PRETRAINED_DIR / "ppo_residual.yml").read_text())
+    like = shipped["CNTDeposit-v0"]["env_wrapper"][0]["training.common.ResidualAction"]
+    assert wrap["a"]["base_kwargs"] == like["base_kwargs"] != cfg["CNTDeposit-v0"][
+        "env_wrapper"][0]["training.common.ResidualAction"]["base_kwargs"]  # fmt: skip
+    assert "mirror_average" not in wrap["a"] and wrap["b"]["mirror_average"] is True
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--name", "x"], "lacks"),  # no statistics or .yml beside the zip
+        (["--name", "a/b"], "bare file stem"),
+        (["--name", "x", "--keepout-headings", "up"], "headings are"),
+    ],
+)
+def test_candidate_bad_input_is_a_usage_error(tmp_path: Path, capsys, argv, message) -> None:
+    from training.candidate import main as candidate_main
+
+    (tmp_path / "ppo.zip").write_bytes(b"net")
+    with pytest.raises(SystemExit) as exc:
+        like = str(PRETRAINED_DIR / "ppo_residual.yml")
+        candidate_main([str(tmp_path / "ppo.zip"), "--like", like, "--out", str(tmp_path / "m"),
+                        *argv])  # fmt: skip
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
