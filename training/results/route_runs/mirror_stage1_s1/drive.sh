@@ -39,3 +39,9 @@ done
   --config training/configs/eval.yml --out $O/validation.json > $O/validation.log 2>&1
 .venv/bin/cnt-evaluate --policies m1_final,m1_best,m1_final_avg,m1_best_avg \
   --models "$M" policies/pretrained --out $O/seeds_0-2 --jobs 2 > $O/seeds_0-2.log 2>&1
+# Afterwards (as run): the +z drawn detours of ../mirror_stage1 (14 routes), the final
+# model as trained and averaged, ungated (benchmarks/results/plus_z_detours_m1_*.jsonl).
+for v in m1_final_avg m1_final; do
+  .venv/bin/python benchmarks/detour_shorts.py --first 6000 --count 400 --heading=+z \
+    --policies ungated --agent $M/$v.zip --jobs 2 --out benchmarks/results/plus_z_detours_$v.jsonl
+done
