@@ -1067,6 +1067,17 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
     assert resolved["run"]["max_wall_seconds"] == pytest.approx(timing["stage2_budget_s"], abs=0.1)
     assert timing["stage2_budget_s"] == pytest.approx(900.0 - 45.0 - timing["stage1_s"], abs=0.2)
 
+    # a stage 2 tried again over the same stage 1: its spent time counts, nothing retrains
+    again = run_two_stages("ppo", {}, stage2, tmp_path / "again", seed=0, stage2_seed=1,
+                           stage1_s=0.0, total_s=900.0, steps_per_second=0.1,
+                           stage1_model=first, stage1_spent_s=300.0)  # fmt: skip
+    timing = json.loads((tmp_path / "again" / "timing.json").read_text())
+    assert not (tmp_path / "again" / "stage1").exists() and again.is_file()
+    assert timing["stage2_budget_s"] == pytest.approx(900.0 - 45.0 - 300.0, abs=0.2)
+    assert timing["stage1_model"] == str(first)
+    resolved = yaml.safe_load((again.parent / "config.yml").read_text())
+    assert resolved["run"]["trained_agent"]["path"] == str(first)
+
     assert stage2_budget(100.0, 20.0, 10.0, 2.0) == (70.0, 140)
     with pytest.raises(ValueError, match="no time is left"):
         stage2_budget(100.0, 90.0, 45.0, 50.0)
@@ -1078,6 +1089,20 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
     for argv in (["--stage1-seconds", "900", "--total-seconds", "900"], []):
         with pytest.raises(SystemExit) as stop:
             two_stage_main(["--stage1", str(cfg1), "--stage2", str(cfg2), *argv,
+                            "--out", str(tmp_path / "cli")])  # fmt: skip
+        assert stop.value.code == 2 and not (tmp_path / "cli").exists()
+    cfg3 = tmp_path / "s3.yml"  # a stage 2 that stage 1's agent fits
+    cfg3.write_text(yaml.safe_dump({"CNTDeposit-v0": stage2}))
+    for argv in (
+        ["--stage1", str(cfg1), "--stage1-model", str(first), "--stage1-spent", "300"],
+        ["--stage1-model", str(first)],  # its spent time is needed
+        ["--stage1-model", str(tmp_path / "none.zip"), "--stage1-spent", "300"],
+        ["--stage1-model", str(first), "--stage1-spent", "900"],  # nothing left
+        ["--stage1-model", str(first), "--stage1-spent", "300", "--stage2", str(cfg2)],
+    ):  # the last: another residual scale than the trained model's
+        argv = argv if "--stage2" in argv else [*argv, "--stage2", str(cfg3)]
+        with pytest.raises(SystemExit) as stop:  # (a regression trains ~1 step, not hours)
+            two_stage_main([*argv, "--total-seconds", "900", "--steps-per-second", "0.01",
                             "--out", str(tmp_path / "cli")])  # fmt: skip
         assert stop.value.code == 2 and not (tmp_path / "cli").exists()
 

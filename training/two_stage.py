@@ -5,6 +5,8 @@
         --stage2 training/configs/ppo_residual_shipped_detour_finetune.yml \\
         --seed 1 [--stage1-seconds 2400] [--total-seconds 3600] \\
         [--steps-per-second 50] [--startup-seconds 45] [--out runs]
+    python -m training.two_stage --stage1-model STAGE1/ppo.zip --stage1-spent 2406 \
+        --stage2 CONFIG --stage2-seed 1 [--total-seconds 3600] [--out runs]
 
 Stage 1 trains ``--stage1`` from scratch (seed ``--seed``) until its ``n_timesteps`` or
 ``--stage1-seconds`` of wall time, whichever comes first (its learning-rate schedule
@@ -21,6 +23,13 @@ written out as a shell script (``training/results/route_runs/resid_two40_s1/driv
 which rewrote the stage-1 model's base options instead of ``--new-base-options``); the
 defaults above are its numbers, with its stage-1 config ``ppo_residual_recipe_shipped.yml``
 and its second stage ``ppo_residual_shipped_detour_finetune.yml``.
+
+With ``--stage1-model PATH --stage1-spent SECONDS`` stage 1 is not trained: stage 2 goes
+on from that model (a cnt-train zip with its ``.yml``, which stands for ``--stage1`` in the
+check below) and ``SECONDS``, the wall time that model cost with its start-up, counts
+against the total: a second stage tried again over one first stage, inside the same hour
+(``route_runs/mirror_stage1``, ``mirror_symgate`` and ``mirror_stage1_s1`` ran that as
+shell lines over ``route_runs/mirror_hour``'s first stage, 2 406 s).
 
 One run directory ``<out>/two_stage_s<seed>/`` (``_2``, ``_3``, ... when it exists: a run
 never overwrites an earlier one) holds ``stage1/`` and ``stage2/`` (each a cnt-train run
@@ -67,12 +76,19 @@ def stage2_budget(total_s: float, elapsed_s: float, startup_s: float,
 def run_two_stages(algo: str, stage1: dict[str, Any], stage2: dict[str, Any], out: Path,
                    seed: int, stage2_seed: int, stage1_s: float, total_s: float,
                    steps_per_second: float, startup_s: float = 45.0,
-                   progress_bar: bool = False) -> Path:  # fmt: skip
-    """Train both stages into ``out`` (made here); returns stage 2's final model."""
+                   progress_bar: bool = False, stage1_model: Path | None = None,
+                   stage1_spent_s: float = 0.0) -> Path:  # fmt: skip
+    """Train both stages into ``out`` (made here); returns stage 2's final model. Given
+    ``stage1_model``, stage 1 is that model and ``stage1_spent_s`` its wall time (``stage1``
+    and ``stage1_s`` are then unused)."""
     t0 = time.monotonic()
-    first = train(algo, stage1, out / "stage1", seed=seed, max_wall_seconds=stage1_s,
-                  progress_bar=progress_bar)  # fmt: skip
-    t1 = time.monotonic()
+    if stage1_model is None:
+        first = train(algo, stage1, out / "stage1", seed=seed, max_wall_seconds=stage1_s,
+                      progress_bar=progress_bar)  # fmt: skip
+        t1 = time.monotonic()
+    else:
+        first, t1 = Path(stage1_model), time.monotonic()
+        t0 = t1 - stage1_spent_s
     left, steps = stage2_budget(total_s, t1 - t0, startup_s, steps_per_second)
     second = train(algo, {**stage2, "n_timesteps": steps}, out / "stage2", seed=stage2_seed,
                    max_wall_seconds=left, progress_bar=progress_bar, trained_agent=first,
@@ -80,7 +96,8 @@ def run_two_stages(algo: str, stage1: dict[str, Any], stage2: dict[str, Any], ou
     t2 = time.monotonic()
     timing = {"stage1_s": round(t1 - t0, 1), "stage2_s": round(t2 - t1, 1),
               "total_s": round(t2 - t0, 1), "budget_s": total_s,
-              "stage2_budget_s": round(left, 1), "stage2_n_timesteps": steps}  # fmt: skip
+              "stage2_budget_s": round(left, 1), "stage2_n_timesteps": steps,
+              "stage1_model": str(first)}  # fmt: skip
     (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
     return second
 
@@ -89,7 +106,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training.two_stage",
                                 description=__doc__.splitlines()[0])  # fmt: skip
     p.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
-    p.add_argument("--stage1", type=Path, required=True, help="stage 1's config (rl-zoo YAML)")
+    p.add_argument("--stage1", type=Path, default=None, help="stage 1's config (rl-zoo YAML)")
+    p.add_argument("--stage1-model", type=Path, default=None,
+                   help="a trained stage 1 (cnt-train zip): go on from it")  # fmt: skip
+    p.add_argument("--stage1-spent", type=positive_float, default=None,
+                   help="with --stage1-model: its wall time (s), start-up in")  # fmt: skip
     p.add_argument("--stage2", type=Path, required=True, help="stage 2's config (rl-zoo YAML)")
     p.add_argument("--seed", type=seed_int, default=0, help="stage 1's seed")
     p.add_argument("--stage2-seed", type=seed_int, default=0, help="stage 2's seed")
@@ -107,6 +128,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parse_cli(parser, argv)
+    given = args.stage1_model is not None
+    if (args.stage1 is not None) == given:  # exactly one of the two
+        parser.error("give one of --stage1 (a config to train) and --stage1-model (trained)")
+    if given != (args.stage1_spent is not None):
+        parser.error("--stage1-model and --stage1-spent go together")
+    if given:
+        args.stage1_model = args.stage1_model.with_suffix(".zip")
+        args.stage1 = args.stage1_model.with_suffix(".yml")  # its resolved config
+        if not args.stage1_model.is_file():
+            parser.error(f"--stage1-model {args.stage1_model} does not exist")
+        args.stage1_seconds = args.stage1_spent
     if args.stage1_seconds >= args.total_seconds:
         parser.error("--stage1-seconds must be below --total-seconds (stage 2 needs time)")
     try:  # both configs checked before anything trains
@@ -122,7 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     run = fresh_dir(args.out / f"two_stage_s{args.seed}")
     model = run_two_stages(args.algo, stage1, stage2, run, args.seed, args.stage2_seed,
                            args.stage1_seconds, args.total_seconds, args.steps_per_second,
-                           args.startup_seconds, progress_bar=args.progress)  # fmt: skip
+                           args.startup_seconds, progress_bar=args.progress,
+                           stage1_model=args.stage1_model,
+                           stage1_spent_s=args.stage1_spent or 0.0)  # fmt: skip
     print(f"stage 2's final model: {model}")
     return 0
 
