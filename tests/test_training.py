@@ -1098,6 +1098,7 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
         ["--stage1-model", str(first)],  # its spent time is needed
         ["--stage1-model", str(tmp_path / "none.zip"), "--stage1-spent", "300"],
         ["--stage1-model", str(first), "--stage1-spent", "900"],  # nothing left
+        ["--stage1-model", str(first), "--stage1-spent", "880"],  # less than the start-up
         ["--stage1-model", str(first), "--stage1-spent", "300", "--stage2", str(cfg2)],
     ):  # the last: another residual scale than the trained model's
         argv = argv if "--stage2" in argv else [*argv, "--stage2", str(cfg3)]

@@ -5,7 +5,7 @@
         --stage2 training/configs/ppo_residual_shipped_detour_finetune.yml \\
         --seed 1 [--stage1-seconds 2400] [--total-seconds 3600] \\
         [--steps-per-second 50] [--startup-seconds 45] [--out runs]
-    python -m training.two_stage --stage1-model STAGE1/ppo.zip --stage1-spent 2406 \
+    python -m training.two_stage --stage1-model STAGE1/ppo.zip --stage1-spent 2406 \\
         --stage2 CONFIG --stage2-seed 1 [--total-seconds 3600] [--out runs]
 
 Stage 1 trains ``--stage1`` from scratch (seed ``--seed``) until its ``n_timesteps`` or
@@ -138,8 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         args.stage1 = args.stage1_model.with_suffix(".yml")  # its resolved config
         if not args.stage1_model.is_file():
             parser.error(f"--stage1-model {args.stage1_model} does not exist")
+        try:  # the budget is known before anything runs
+            stage2_budget(args.total_seconds, args.stage1_spent, args.startup_seconds,
+                          args.steps_per_second)  # fmt: skip
+        except ValueError as exc:
+            parser.error(str(exc).replace("--stage1-seconds", "--stage1-spent"))
         args.stage1_seconds = args.stage1_spent
-    if args.stage1_seconds >= args.total_seconds:
+    elif args.stage1_seconds >= args.total_seconds:
         parser.error("--stage1-seconds must be below --total-seconds (stage 2 needs time)")
     try:  # both configs checked before anything trains
         stage1, stage2 = load_config(args.stage1), load_config(args.stage2)
