@@ -30,19 +30,19 @@ from typing import Any
 
 import yaml
 
+from policies.opening import AXES
+from policies.residual import WRAPPER, zoo_entry
 from policies.sb3 import model_files, write_manifest
 
 from .common import ENV_ID, parse_cli
 
 __all__ = ["candidate_config", "main", "make_candidate"]
 
-WRAPPER = "training.common.ResidualAction"
-
 
 def _residual_entry(config: dict[str, Any], source: str) -> list[dict[str, Any]]:
     """The ``env_wrapper`` list of ``config`` whose first item is the ResidualAction."""
     wrappers = config.get(ENV_ID, {}).get("env_wrapper")
-    if not isinstance(wrappers, list) or not wrappers or WRAPPER not in wrappers[0]:
+    if not isinstance(wrappers, list) or zoo_entry(wrappers[:1], WRAPPER) is None:
         raise ValueError(f"{source} is not a residual agent's config: its {ENV_ID} "
                          f"env_wrapper does not start with {WRAPPER}")  # fmt: skip
     return wrappers
@@ -56,7 +56,7 @@ def candidate_config(run: dict[str, Any], like: dict[str, Any], note: str,
     ``mirror_average: true`` (if set) over them, and ``note`` as
     ``run: base_set_after_training``."""
     wrappers = _residual_entry(run, "the run's config")
-    wrap = dict(_residual_entry(like, "--like")[0][WRAPPER])
+    wrap = zoo_entry(_residual_entry(like, "--like")[:1], WRAPPER)
     if keepout_headings is not None:
         wrap["keepout_headings"] = list(keepout_headings)
     if mirror_average:
@@ -71,8 +71,7 @@ def make_candidate(model: Path, like: Path, name: str, out: Path, note: str | No
                    keepout_headings: list[str] | None = None) -> Path:  # fmt: skip
     """Write the candidate ``<out>/<name>.zip`` (+ statistics and ``.yml``) and the
     folder's manifest; returns the zip's path."""
-    files = model_files(model)
-    zip_path, npz, js, _pkl, yml = files
+    zip_path, npz, js, _pkl, yml = model_files(model)
     missing = [p for p in (zip_path, npz, js, yml) if not p.is_file()]
     if missing:
         raise ValueError(f"{model} lacks {', '.join(map(str, missing))}: give a model that "
@@ -85,21 +84,19 @@ def make_candidate(model: Path, like: Path, name: str, out: Path, note: str | No
             note += f", gate [{', '.join(keepout_headings)}]"
     text = candidate_config(run, like_cfg, note, mirror_average, keepout_headings)
     out.mkdir(parents=True, exist_ok=True)
-    target = out / f"{name}.zip"
-    shutil.copyfile(zip_path, target)
-    stem = f"{name}_vecnormalize"
-    shutil.copyfile(npz, out / f"{stem}.npz")
-    shutil.copyfile(js, out / f"{stem}.json")
-    (out / f"{name}.yml").write_text(text)
+    target, target_npz, target_js, _, target_yml = model_files(out / f"{name}.zip")
+    for src, dst in ((zip_path, target), (npz, target_npz), (js, target_js)):
+        shutil.copyfile(src, dst)
+    target_yml.write_text(text)
     write_manifest(out)
     return target
 
 
 def _headings(text: str) -> list[str]:
     items = [h.strip() for h in text.split(",") if h.strip()]
-    bad = [h for h in items if h not in ("+x", "-x", "+z", "-z")]
+    bad = [h for h in items if h not in AXES]
     if bad:
-        raise argparse.ArgumentTypeError(f"headings are +x, -x, +z, -z; got {bad}")
+        raise argparse.ArgumentTypeError(f"headings are {', '.join(AXES)}; got {bad}")
     return items
 
 

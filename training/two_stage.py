@@ -143,7 +143,6 @@ def main(argv: list[str] | None = None) -> int:
                           args.steps_per_second)  # fmt: skip
         except ValueError as exc:
             parser.error(str(exc).replace("--stage1-seconds", "--stage1-spent"))
-        args.stage1_seconds = args.stage1_spent
     elif args.stage1_seconds >= args.total_seconds:
         parser.error("--stage1-seconds must be below --total-seconds (stage 2 needs time)")
     try:  # both configs checked before anything trains
