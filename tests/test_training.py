@@ -725,7 +725,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     sac_residual.yml (and its _sde twin) trains residual SAC on the calibrated surrogate,
     detour 2 in 9; ppo_residual_start_model.yml goes on training the shipped agent on the
     model itself, on the first control steps of its episodes, and
-    ppo_residual_model_detour_finetune.yml on the model's detours."""
+    ppo_residual_model_detour_finetune.yml on the model's detours;
+    ppo_residual_detour_only_finetune.yml is the shipped detour stage drawing detours
+    only (a keep-out split's specialist)."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -749,7 +751,11 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     detour_share = {"_detour.yml": (3, 10), "_detour2.yml": (2, 9), "_curriculum.yml": (3, 10),
                     "_open_then_detour.yml": once}  # fmt: skip
     last_share = {"_curriculum.yml": once, "_open_then_detour.yml": (3, 10)}
-    calibrated_share = {"sac_residual.yml": (2, 9), "sac_residual_sde.yml": (2, 9)}  # other names
+    calibrated_share = {
+        "sac_residual.yml": (2, 9),
+        "sac_residual_sde.yml": (2, 9),
+        "ppo_residual_detour_only_finetune.yml": (1, 1),
+    }  # other names
     for path in configs:
         # the longest suffix that matches (_open_then_detour.yml also ends in _detour.yml)
         suffix = max((k for k in detour_share if path.name.endswith(k)), key=len, default=None)

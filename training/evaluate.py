@@ -41,8 +41,9 @@ policy's first-seed episode per target (skipped with a message if rerun is missi
 (:func:`cnt_env.replay.write_video`; needs the video extra).
 
 A policy ``a+b`` is the ensemble of models ``a`` and ``b``: it plays the mean of their
-actions (:class:`policies.ensemble.MeanPolicy`); ``--models`` may list several
-directories, the first holding a name wins.
+actions (:class:`policies.ensemble.MeanPolicy`); ``a|b`` plays model a on routes without
+a keep-out and b on routes with one (:class:`policies.ensemble.KeepoutSplit`; quote it in
+a shell); ``--models`` may list several directories, the first holding a name wins.
 
 Models are loaded without running code from their files (:func:`policies.load_policy`,
 docs/security.md); ``--trust`` lifts that for files you trust.
@@ -134,8 +135,10 @@ def _make_policy(spec: dict[str, Any], env):
     agents = [load_policy(m, trust=bool(spec.get("trust")), env=env) for m in spec["models"]]
     if len(agents) == 1:
         return agents[0]
-    from policies.ensemble import MeanPolicy
+    from policies.ensemble import KeepoutSplit, MeanPolicy
 
+    if SPLIT in kind:
+        return KeepoutSplit(*agents, env.unwrapped.observation_slices, name=kind)
     return MeanPolicy(agents, name=kind)
 
 
@@ -147,9 +150,21 @@ def model_file(name: str, models: Path | Sequence[Path]) -> Path:
     return next((q for q in paths if q.is_file()), paths[0])
 
 
+#: ``a|b``: model a on routes without a keep-out, b on routes with one
+#: (:class:`policies.ensemble.KeepoutSplit`)
+SPLIT = "|"
+
+
 def ensemble_members(policy: str) -> list[str]:
     """The model names of a policy: ``a+b`` is the ensemble of models ``a`` and ``b``
-    (:class:`policies.ensemble.MeanPolicy`), any other name one model."""
+    (:class:`policies.ensemble.MeanPolicy`), ``a|b`` model a on routes without a keep-out
+    and b on routes with one (:class:`policies.ensemble.KeepoutSplit`), any other name
+    one model."""
+    if SPLIT in policy:
+        members = policy.split(SPLIT)
+        if len(members) != 2 or "+" in policy or not all(members):
+            raise ValueError(f"a keep-out split is two model names, 'a|b', got {policy!r}")
+        return members
     return policy.split("+")
 
 
@@ -754,7 +769,7 @@ def evaluate(
         # model's results are otherwise alike), and each trained policy's model file
         "env_kwargs": to_jsonable(env_kwargs),
         "max_episode_steps": max_steps,
-        "models": {p: "+".join(map(shown_path, spec["models"]))
+        "models": {p: (SPLIT if SPLIT in p else "+").join(map(shown_path, spec["models"]))
                    for p, spec in specs.items() if "models" in spec},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -861,7 +876,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--models", type=Path, nargs="+", default=[PRETRAINED],
                    help="directories of the models <policy>.zip, their <policy>_vecnormalize"
                         ".npz + .json and MANIFEST.json; the first holding a name wins "
-                        "(--policies a+b: the ensemble of models a and b)")  # fmt: skip
+                        "(--policies a+b: the ensemble of models a and b; 'a|b': a on "
+                        "routes without a keep-out, b on routes with one)")  # fmt: skip
     p.add_argument("--trust", action="store_true",
                    help="also load what cannot be loaded without running code from the "
                         "file (a *_vecnormalize.pkl, a zip whose pickled entries cannot be "
@@ -921,12 +937,17 @@ def main(argv: list[str] | None = None) -> int:
     for p in csv_list(args.policies):  # before any directory is made
         if p in BASELINES:
             continue
-        for name in ensemble_members(p):
+        try:
+            members = ensemble_members(p)
+        except ValueError as exc:
+            parser.error(f"--policies: {exc}")
+        for name in members:
             model = model_file(name, args.models)
             if name in BASELINES or not model.is_file():
                 parser.error(f"--policies: {name!r} is neither a baseline "
                              f"({', '.join(BASELINES)}) nor a model: there is no {model} "
-                             "(--models; a+b: the ensemble of models a and b)")  # fmt: skip
+                             "(--models; a+b: the ensemble of models a and b, a|b: the "
+                             "keep-out split)")  # fmt: skip
     for flag in ("out", "save_episodes", "rrd", "video"):
         check_dir_option(parser, flag, getattr(args, flag))
     out = args.out or fresh_dir(Path("runs") / "evaluate" / score_mode(env_kwargs))

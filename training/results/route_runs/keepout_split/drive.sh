@@ -1,0 +1,39 @@
+#!/bin/bash
+# A split agent inside one hour (2026-12-06): route_runs/mirror_hour's first stage
+# (model/mh_stage1, 2 406 s with start-up) plays routes without a keep-out; a copy of it
+# trained for the rest of the hour on detours only
+# (configs/ppo_residual_detour_only_finetune.yml, seed 0) plays routes with one
+# (policies/ensemble.py KeepoutSplit, `a|b` in cnt-evaluate). Then the candidates over the
+# shipped agent's base and gate (python -m training.candidate), the 12 validation routes,
+# the +z drawn detours, and held out. Training is skipped when its run directory is there.
+# R: the run directory.
+set -e
+cd "$(dirname "$0")/../../../.."
+O=training/results/route_runs/keepout_split
+H=training/results/route_runs/mirror_hour
+R=${R:-/tmp/runs/kosplit}
+mkdir -p $R
+if [ ! -d $R/runs/two_stage_s0 ]; then
+  .venv/bin/python -m training.two_stage --stage1-model $H/model/mh_stage1.zip \
+    --stage1-spent 2406 --stage2 training/configs/ppo_residual_detour_only_finetune.yml \
+    --stage2-seed 0 --out $R/runs > $R/train.log 2>&1
+fi
+S2=$R/runs/two_stage_s0/stage2/
+cp ${S2}learning_curve.csv ${S2}config.yml $R/runs/two_stage_s0/timing.json $O/
+M=$R/models
+LIKE=policies/pretrained/ppo_residual.yml
+.venv/bin/python -m training.candidate $H/model/mh_stage1.zip --like $LIKE --name s1 --out $M
+for pair in "ppo:ks_final" "best_model:ks_best"; do
+  src=${pair%%:*}; dst=${pair##*:}
+  .venv/bin/python -m training.candidate ${S2}$src.zip --like $LIKE --name $dst --out $M
+  .venv/bin/python -m training.candidate ${S2}$src.zip --like $LIKE --name ${dst}_z --out $M \
+    --keepout-headings=-z,+z
+done
+.venv/bin/python benchmarks/checkpoint_selection.py --models "$M" \
+  --names "s1|ks_final,s1|ks_best,s1|ks_final_z,s1|ks_best_z" --routes 12 --jobs 2 \
+  --config training/configs/eval.yml --out $O/validation.json > $O/validation.log 2>&1
+# Afterwards (as run): held out, seeds 0-2, the two splits with the symmetric gate (on the
+# held-out routes, which have no keep-out route starting along z, the same as without it).
+.venv/bin/cnt-evaluate --policies "random,scripted,ppo_residual,s1|ks_final_z,s1|ks_best_z" \
+  --models "$M" policies/pretrained --reuse training/results --out $O/seeds_0-2 \
+  --jobs 2 > $O/seeds_0-2.log 2>&1
