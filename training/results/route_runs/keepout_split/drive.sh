@@ -37,3 +37,13 @@ done
 .venv/bin/cnt-evaluate --policies "random,scripted,ppo_residual,s1|ks_final_z,s1|ks_best_z" \
   --models "$M" policies/pretrained --reuse training/results --out $O/seeds_0-2 \
   --jobs 2 > $O/seeds_0-2.log 2>&1
+# Afterwards (as run, looked at after the decision): the specialist on the drawn detours,
+# ungated (on the surrogate it trained on, on the model, and the +z set).
+.venv/bin/python benchmarks/detour_shorts.py --first 1000 --count 124 --policies ungated \
+  --agent $M/ks_final.zip --config policies/pretrained/ppo_residual.yml --jobs 2 \
+  --out benchmarks/results/detour_shorts_surrogate_ks_final.jsonl
+.venv/bin/python benchmarks/detour_shorts.py --first 1000 --count 124 --policies ungated \
+  --agent $M/ks_final.zip --jobs 2 --out benchmarks/results/detour_shorts_ks_final.jsonl
+.venv/bin/python benchmarks/detour_shorts.py --first 6000 --count 400 --heading=+z \
+  --policies ungated --agent $M/ks_final.zip --jobs 2 \
+  --out benchmarks/results/plus_z_detours_ks_final.jsonl
