@@ -47,3 +47,6 @@ done
 .venv/bin/python benchmarks/detour_shorts.py --first 6000 --count 400 --heading=+z \
   --policies ungated --agent $M/ks_final.zip --jobs 2 \
   --out benchmarks/results/plus_z_detours_ks_final.jsonl
+# Then held out, seeds 3-8, the validation pick (only episodes.csv and results.md kept).
+.venv/bin/cnt-evaluate --policies "s1|ks_final_z" --models "$M" policies/pretrained \
+  --seeds 3,4,5,6,7,8 --out $O/seeds_3-8 --jobs 2 > $O/seeds_3-8.log 2>&1
