@@ -584,29 +584,3 @@ def test_algorithm_comes_from_the_name_else_the_config_beside_the_model(tmp_path
     (tmp_path / "best_model.yml").write_text("run: [unclosed\n")  # corrupt: the same error
     with pytest.raises(ValueError, match="pass the algorithm"):
         algo_of(tmp_path / "best_model.zip")
-
-
-def test_mean_policy_plays_the_mean_of_its_members() -> None:
-    """policies.ensemble.MeanPolicy: the members' mean, in [-1, 1]; reset reaches every
-    member; one member is not an ensemble."""
-    from policies.ensemble import MeanPolicy
-
-    class Fixed:
-        def __init__(self, a: list[float]) -> None:
-            self.a, self.seeds = np.asarray(a, dtype=np.float32), []
-
-        def reset(self, seed=None) -> None:
-            self.seeds.append(seed)
-
-        def act(self, obs):
-            return self.a
-
-    members = [Fixed([1.0, -1.0]), Fixed([0.0, -1.0]), Fixed([-0.5, 0.25])]
-    ens = MeanPolicy(members)
-    ens.reset(7)
-    assert all(m.seeds == [7] for m in members)
-    out = ens.act(np.zeros(3))
-    assert out.dtype == np.float32
-    np.testing.assert_allclose(out, [1.0 / 6.0, -0.5833333], rtol=1e-6)
-    with pytest.raises(ValueError, match="at least two"):
-        MeanPolicy(members[:1])

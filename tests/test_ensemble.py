@@ -1,6 +1,7 @@
-"""``a|b`` (policies/ensemble.py KeepoutSplit): agent a plays routes without a keep-out,
-agent b routes with one, chosen at an episode's first observation; in cnt-evaluate the
-split lays each member's own traces bit for bit."""
+"""Agents combined (policies/ensemble.py): ``a+b`` (MeanPolicy) plays the mean of its
+members' actions; ``a|b`` (KeepoutSplit) plays agent a on routes without a keep-out and
+agent b on routes with one, chosen at an episode's first observation, and in
+cnt-evaluate lays each member's own traces bit for bit."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from policies import PRETRAINED_DIR
-from policies.ensemble import KeepoutSplit
+from policies.ensemble import KeepoutSplit, MeanPolicy
 
 pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 BLOCK = [{"rect": [-40.0, -90.0, -10.0, -70.0]}]
@@ -30,6 +31,20 @@ class Fixed:
 
     def act(self, obs):
         return self.a
+
+
+def test_mean_policy_plays_the_mean_of_its_members() -> None:
+    """The members' mean, in [-1, 1]; reset reaches every member; one member is not an
+    ensemble."""
+    members = [Fixed([1.0, -1.0]), Fixed([0.0, -1.0]), Fixed([-0.5, 0.25])]
+    ens = MeanPolicy(members)
+    ens.reset(7)
+    assert all(m.seeds == [7] for m in members)
+    out = ens.act(np.zeros(3))
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out, [1.0 / 6.0, -0.5833333], rtol=1e-6)
+    with pytest.raises(ValueError, match="at least two"):
+        MeanPolicy(members[:1])
 
 
 def _env():
