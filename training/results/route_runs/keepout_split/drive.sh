@@ -50,3 +50,14 @@ done
 # Then held out, seeds 3-8, the validation pick (only episodes.csv and results.md kept).
 .venv/bin/cnt-evaluate --policies "s1|ks_final_z" --models "$M" policies/pretrained \
   --seeds 3,4,5,6,7,8 --out $O/seeds_3-8 --jobs 2 > $O/seeds_3-8.log 2>&1
+# Then (as run) stage 2 again with seed 1, and its final model on the same drawn detours.
+.venv/bin/python -m training.two_stage --stage1-model $H/model/mh_stage1.zip \
+  --stage1-spent 2406 --stage2 training/configs/ppo_residual_detour_only_finetune.yml \
+  --stage2-seed 1 --out $R/runs > $R/train_s1.log 2>&1
+.venv/bin/python -m training.candidate $R/runs/two_stage_s0_2/stage2/ppo.zip --like $LIKE \
+  --name ks1_final --out $M
+.venv/bin/python benchmarks/detour_shorts.py --first 1000 --count 124 --policies ungated \
+  --agent $M/ks1_final.zip --jobs 2 --out benchmarks/results/detour_shorts_ks1_final.jsonl
+.venv/bin/python benchmarks/detour_shorts.py --first 6000 --count 400 --heading=+z \
+  --policies ungated --agent $M/ks1_final.zip --jobs 2 \
+  --out benchmarks/results/plus_z_detours_ks1_final.jsonl
