@@ -47,17 +47,8 @@ def test_mean_policy_plays_the_mean_of_its_members() -> None:
         MeanPolicy(members[:1])
 
 
-def _env():
-    import gymnasium as gym
-
-    from training.common import env_settings, load_config
-
-    env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / "ppo_residual.yml"))
-    return gym.make("CNTDeposit-v0", **env_kwargs)
-
-
-def test_the_split_plays_one_agent_per_route_kind_for_the_whole_episode() -> None:
-    env = _env()
+def test_the_split_plays_one_agent_per_route_kind_for_the_whole_episode(agent_env) -> None:
+    env = agent_env
     a, b = Fixed([0.5, 0.0]), Fixed([-0.5, 0.25])
     split = KeepoutSplit(a, b, env.unwrapped.observation_slices)
     for route, agent in ((WITH, b), (WITHOUT, a), (WITH, b)):
@@ -70,7 +61,6 @@ def test_the_split_plays_one_agent_per_route_kind_for_the_whole_episode() -> Non
     assert a.seeds == [4] and b.seeds == [4, 4]  # only the chosen agent is reset
     with pytest.raises(ValueError, match="route"):
         KeepoutSplit(a, b, {})
-    env.close()
 
 
 @pytest.mark.parametrize("name", ["a|b|c", "a|", "|b", "a+b|c"])

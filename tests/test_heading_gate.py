@@ -29,18 +29,9 @@ def test_axis_of_is_the_nearest_axis_x_on_a_tie(d, axis) -> None:
 
 
 @pytest.mark.parametrize("headings", ["-z", ["z"], ["-y"], ["-z", "down"]])
-def test_a_bad_heading_is_refused(headings) -> None:
+def test_a_bad_heading_is_refused(headings, agent_env) -> None:
     with pytest.raises(ValueError, match="keepout_headings"):
-        HeadingGate(headings, {}, _agent_env())
-
-
-def _agent_env():
-    import gymnasium as gym
-
-    from training.common import env_settings, load_config
-
-    env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / "ppo_residual.yml"))
-    return gym.make("CNTDeposit-v0", **env_kwargs)
+        HeadingGate(headings, {}, agent_env)
 
 
 def _actions(policy, env, route, n: int = 2) -> list[np.ndarray]:
@@ -55,8 +46,8 @@ def _actions(policy, env, route, n: int = 2) -> list[np.ndarray]:
 
 
 @pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
-def test_the_agent_hands_a_gated_route_to_the_follower_only() -> None:
-    env = _agent_env()
+def test_the_agent_hands_a_gated_route_to_the_follower_only(agent_env) -> None:
+    env = agent_env
     gated = load_policy(AGENT, env=env, keepout_headings=("-z",))
     plain = load_policy(AGENT, env=env, keepout_headings=())
     follower = RouteFollower.from_env(env)  # the follower with its defaults, not the base
@@ -68,7 +59,6 @@ def test_the_agent_hands_a_gated_route_to_the_follower_only() -> None:
         on_route = _actions(gated, env, route)
         assert not gated.gate.deferred
         assert np.array_equal(on_route, _actions(plain, env, route))
-    env.close()
 
 
 @pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
@@ -77,10 +67,10 @@ def test_keepout_headings_needs_a_residual_agent() -> None:
         load_policy(PRETRAINED_DIR / "ppo.zip", keepout_headings=("-z",))
 
 
-def test_the_training_wrapper_ignores_the_action_on_a_gated_route() -> None:
+def test_the_training_wrapper_ignores_the_action_on_a_gated_route(agent_env) -> None:
     from training.common import ResidualAction
 
-    env = _agent_env()
+    env = agent_env
 
     def first_obs(headings, route, action) -> np.ndarray:
         w = ResidualAction(env, scale=1.0, keepout_headings=headings)
@@ -92,17 +82,15 @@ def test_the_training_wrapper_ignores_the_action_on_a_gated_route() -> None:
     for route in (OUT, DOWN_OPEN):
         other = [first_obs(("-z",), route, a) for a in ([1.0, 1.0], [-1.0, -1.0])]
         assert not np.array_equal(*other)
-    env.close()
 
 
-def test_has_keepout_reads_the_far_point_as_none() -> None:
-    env = _agent_env()
+def test_has_keepout_reads_the_far_point_as_none(agent_env) -> None:
+    env = agent_env
     slices = env.unwrapped.observation_slices
     with_one = env.reset(seed=0, options={"target": DOWN})[0]
     without = env.reset(seed=0, options={"target": DOWN_OPEN})[0]
     assert has_keepout(with_one, slices) and not has_keepout(without, slices)
     assert not has_keepout(with_one, {"trace": slice(0, 2)})  # the thin task: no route slice
-    env.close()
 
 
 def test_a_gate_needs_the_route_tasks_env() -> None:
@@ -112,11 +100,11 @@ def test_a_gate_needs_the_route_tasks_env() -> None:
 
 
 @pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
-def test_the_shipped_gate_hands_over_no_held_out_route() -> None:
+def test_the_shipped_gate_hands_over_no_held_out_route(agent_env) -> None:
     """The committed held-out scores of the shipped agent were measured before its gate."""
     from cnt_env.task import routes
 
-    env = _agent_env()
+    env = agent_env
     agent = load_policy(AGENT, env=env)
     assert agent.gate.headings == ("-z",)
     for seed in (0, 1, 2):
@@ -125,4 +113,3 @@ def test_the_shipped_gate_hands_over_no_held_out_route() -> None:
             agent.reset(seed)
             agent.act(obs)
             assert not agent.gate.deferred, name
-    env.close()

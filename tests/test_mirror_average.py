@@ -45,13 +45,8 @@ def test_the_mirror_average_is_equivariant_and_changes_the_action(n_stack) -> No
 
 
 @pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
-def test_the_config_key_and_the_override_set_it() -> None:
-    import gymnasium as gym
-
-    from training.common import env_settings, load_config
-
-    env_kwargs, _ = env_settings(load_config(PRETRAINED_DIR / "ppo_residual.yml"))
-    env = gym.make("CNTDeposit-v0", **env_kwargs)
+def test_the_config_key_and_the_override_set_it(agent_env) -> None:
+    env = agent_env
     assert load_policy(AGENT, env=env).mirror is None  # shipped: off
     on = load_policy(AGENT, env=env, mirror_average=True)
     assert on.mirror == env.unwrapped.layout.z_mirror
@@ -60,7 +55,6 @@ def test_the_config_key_and_the_override_set_it() -> None:
     off = load_policy(AGENT, env=env)
     off.reset(3)
     assert not np.array_equal(on.act(obs), off.act(obs))
-    env.close()
 
 
 @pytest.mark.skipif(not AGENT.is_file(), reason="no pretrained models")
