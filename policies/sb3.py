@@ -46,6 +46,7 @@ __all__ = [
     "NormalizerStats",
     "SB3Policy",
     "UntrustedModelError",
+    "algo_class",
     "check_manifest",
     "convert_vecnormalize_pickle",
     "file_sha256",
@@ -59,7 +60,9 @@ __all__ = [
     "write_manifest",
 ]
 
-ALGOS = ("ppo", "sac")
+#: The algorithms of cnt-train: SB3's PPO and SAC, and sb3-contrib's RecurrentPPO as
+#: rl-zoo names it (``ppo_lstm``: PPO with an LSTM in the policy and the value function).
+ALGOS = ("ppo", "sac", "ppo_lstm")
 MANIFEST_NAME = "MANIFEST.json"
 MANIFEST_FORMAT = "cnt_env manifest 1"
 TRUST_HINT = ("pass --trust (cnt-evaluate) or trust=True (policies.load_policy) only if "
@@ -150,6 +153,9 @@ _POLICY_CLASSES = {
     "ppo": ("stable_baselines3.common.policies",
             ("ActorCriticPolicy", "ActorCriticCnnPolicy", "MultiInputActorCriticPolicy")),
     "sac": ("stable_baselines3.sac.policies", ("SACPolicy", "CnnPolicy", "MultiInputPolicy")),
+    "ppo_lstm": ("sb3_contrib.common.recurrent.policies",
+                 ("RecurrentActorCriticPolicy", "RecurrentActorCriticCnnPolicy",
+                  "RecurrentMultiInputActorCriticPolicy")),
 }  # fmt: skip
 _FLOAT = re.compile(r"[-+]?(?:\d+\.?\d*(?:[eE][-+]?\d+)?|\.\d+(?:[eE][-+]?\d+)?|inf|nan)")
 
@@ -308,6 +314,10 @@ class SB3Policy:
         self.frame_stack = int(frame_stack)
         #: one stack per view: the observation, and with ``mirror`` its mirror image
         self._stacks: dict[bool, np.ndarray] = {}
+        #: a recurrent model's (RecurrentPPO, ``ppo_lstm``) LSTM states, one per view;
+        #: absent at an episode's start (SB3's ``episode_start``, which zeroes them)
+        self.recurrent = hasattr(getattr(model, "policy", None), "lstm_actor")
+        self._lstm: dict[bool, Any] = {}
         #: ``mirror_average``: the model's action is the mean of its action for the
         #: observation and, mirrored back, for the observation's mirror image in z
         #: (``mirror``: the env's ``ObservationLayout.z_mirror``; with ``observe_base``
@@ -323,6 +333,7 @@ class SB3Policy:
 
     def reset(self, seed: int | None = None) -> None:
         self._stacks = {}
+        self._lstm = {}
         if self.base is not None:
             self.base.reset(seed)
         if self.gate is not None:
@@ -330,8 +341,8 @@ class SB3Policy:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """The action for ``obs``; call :meth:`reset` at each episode's start (with
-        ``frame_stack`` the stack restarts there; with ``keepout_headings`` the route's
-        heading is read off the observation after it)."""
+        ``frame_stack`` the stack restarts there, a recurrent model's memory too; with
+        ``keepout_headings`` the route's heading is read off the observation after it)."""
         if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
         b = self.base.act(obs) if self.base is not None else None
@@ -361,8 +372,30 @@ class SB3Policy:
             stack = np.roll(stack, -d, axis=-1)
             stack[:, -d:] = o
             self._stacks[mirrored] = o = stack
-        action, _ = self.model.predict(o, deterministic=True)
+        if self.recurrent:
+            state = self._lstm.get(mirrored)
+            action, self._lstm[mirrored] = self.model.predict(
+                o, state=state, episode_start=np.array([state is None]), deterministic=True
+            )
+        else:
+            action, _ = self.model.predict(o, deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(-1)
+
+
+def algo_class(algo: str):
+    """The SB3 class of ``algo`` (one of :data:`ALGOS`); ``ppo_lstm`` needs sb3-contrib."""
+    if algo == "ppo_lstm":
+        try:
+            from sb3_contrib import RecurrentPPO
+        except ImportError as exc:
+            raise ImportError("ppo_lstm (RecurrentPPO) needs sb3-contrib: "
+                              "pip install 'sb3-contrib~=2.9.0'") from exc  # fmt: skip
+        return RecurrentPPO
+    from stable_baselines3 import PPO, SAC
+
+    if algo not in ("ppo", "sac"):
+        raise ValueError(f"unknown algorithm {algo!r}; one of {ALGOS}")
+    return {"ppo": PPO, "sac": SAC}[algo]
 
 
 def model_config(model_path: Path) -> Any:
@@ -382,7 +415,9 @@ def algo_of(model_path: str | Path, algo: str | None = None) -> str:
     model_path = Path(model_path)
     cfg_path = model_path.with_suffix(".yml")
     if algo is None:
-        algo = next((a for a in ALGOS if a in model_path.name.lower()), None)
+        # the longest name first: "ppo_lstm.zip" also contains "ppo"
+        names = sorted(ALGOS, key=len, reverse=True)
+        algo = next((a for a in names if a in model_path.name.lower()), None)
     if algo is None:
         import yaml
 
@@ -445,12 +480,10 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
-    from stable_baselines3 import PPO, SAC
-
     model_path = Path(model_path)
     algo = algo_of(model_path, algo)
     check_model(model_path, algo, trust)
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    cls = algo_class(algo)
     if trust:
         model = cls.load(str(model_path), device=device)
     else:

@@ -27,7 +27,8 @@ SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
 SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml",
                  "ppo_residual_start_mirror_finetune.yml",
                  "ppo_residual_detour_mirror_finetune.yml",
-                 "ppo_residual_detour_symgate_finetune.yml")  # fmt: skip
+                 "ppo_residual_detour_symgate_finetune.yml",
+                 "ppo_lstm_residual_detour_finetune.yml")  # fmt: skip
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
@@ -727,7 +728,9 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     model itself, on the first control steps of its episodes, and
     ppo_residual_model_detour_finetune.yml on the model's detours;
     ppo_residual_detour_only_finetune.yml is the shipped detour stage drawing detours
-    only (a keep-out split's specialist)."""
+    only (a keep-out split's specialist); ppo_lstm_residual_recipe.yml and
+    ppo_lstm_residual_detour_finetune.yml are the shipped recipe's two stages with a
+    recurrent policy."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import curriculum_settings, env_settings, load_config, make_env
@@ -1112,6 +1115,14 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
             two_stage_main([*argv, "--total-seconds", "900", "--steps-per-second", "0.01",
                             "--out", str(tmp_path / "cli")])  # fmt: skip
         assert stop.value.code == 2 and not (tmp_path / "cli").exists()
+
+    # over a given first stage the run is named by stage 2's seed (--seed trains nothing)
+    for _ in range(2):
+        assert two_stage_main(["--stage1-model", str(first), "--stage1-spent", "300",
+                               "--stage2", str(cfg3), "--seed", "5", "--stage2-seed", "3",
+                               "--total-seconds", "900", "--steps-per-second", "0.1",
+                               "--out", str(tmp_path / "cli")]) == 0  # fmt: skip
+    assert sorted(p.name for p in (tmp_path / "cli").iterdir()) == ["stage2_s3", "stage2_s3_2"]
 
 
 ROUTE_RUNS = Path(__file__).resolve().parents[1] / "training" / "results" / "route_runs"

@@ -51,6 +51,8 @@ import yaml
 from cnt_env.io import to_jsonable
 from policies.residual import pin_base, residual_settings
 from policies.sb3 import (
+    ALGOS,
+    algo_class,
     check_model,
     file_sha256,
     frame_stack,
@@ -165,7 +167,6 @@ def train(
     even where they differ from those it was trained over (recorded as ``base_kwargs_was``)."""
     limit_threads()
     import stable_baselines3
-    from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.monitor import Monitor
@@ -177,7 +178,7 @@ def train(
     )
 
     algo = algo.lower()
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    cls = algo_class(algo)
     env_kwargs, max_steps = env_settings(config)
     check_run_config(config)
     check_callbacks(config)  # the callbacks, checked before any env is built
@@ -428,7 +429,8 @@ def _write_learning_curve(run: Path) -> None:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0],
                                 formatter_class=DefaultsHelp)  # fmt: skip
-    p.add_argument("--algo", choices=("ppo", "sac"), required=True, help="algorithm")
+    p.add_argument("--algo", choices=ALGOS, required=True,
+                   help="algorithm (ppo_lstm: sb3-contrib's RecurrentPPO)")  # fmt: skip
     p.add_argument("--config", type=Path, default=None,
                    help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the model and the envs")

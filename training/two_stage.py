@@ -31,9 +31,11 @@ against the total: a second stage tried again over one first stage, inside the s
 (``route_runs/mirror_stage1``, ``mirror_symgate`` and ``mirror_stage1_s1`` ran that as
 shell lines over ``route_runs/mirror_hour``'s first stage, 2 406 s).
 
-One run directory ``<out>/two_stage_s<seed>/`` (``_2``, ``_3``, ... when it exists: a run
-never overwrites an earlier one) holds ``stage1/`` and ``stage2/`` (each a cnt-train run
-directory) and ``timing.json`` (the wall time of each stage, the steps given to stage 2).
+One run directory ``<out>/two_stage_s<seed>/``, or with ``--stage1-model``
+``<out>/stage2_s<stage2-seed>/`` (``_2``, ``_3``, ... when it exists: a run never
+overwrites an earlier one) holds ``stage1/`` (not with ``--stage1-model``), ``stage2/``
+(each a cnt-train run directory) and ``timing.json`` (the wall time of each stage, the
+steps given to stage 2).
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from policies.sb3 import ALGOS
 
 from .common import (
     check_dir_option,
@@ -105,7 +109,7 @@ def run_two_stages(algo: str, stage1: dict[str, Any], stage2: dict[str, Any], ou
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training.two_stage",
                                 description=__doc__.splitlines()[0])  # fmt: skip
-    p.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
+    p.add_argument("--algo", choices=ALGOS, default="ppo")
     p.add_argument("--stage1", type=Path, default=None, help="stage 1's config (rl-zoo YAML)")
     p.add_argument("--stage1-model", type=Path, default=None,
                    help="a trained stage 1 (cnt-train zip): go on from it")  # fmt: skip
@@ -155,7 +159,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     check_dir_option(parser, "out", args.out)
-    run = fresh_dir(args.out / f"two_stage_s{args.seed}")
+    # named by the seed that trains: --seed is unused over a given first stage
+    name = f"stage2_s{args.stage2_seed}" if given else f"two_stage_s{args.seed}"
+    run = fresh_dir(args.out / name)
     model = run_two_stages(args.algo, stage1, stage2, run, args.seed, args.stage2_seed,
                            args.stage1_seconds, args.total_seconds, args.steps_per_second,
                            args.startup_seconds, progress_bar=args.progress,

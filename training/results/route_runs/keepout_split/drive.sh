@@ -6,20 +6,22 @@
 # (policies/ensemble.py KeepoutSplit, `a|b` in cnt-evaluate). Then the candidates over the
 # shipped agent's base and gate (python -m training.candidate), the 12 validation routes,
 # the +z drawn detours, and held out. Training is skipped when its run directory is there.
-# R: the run directory.
+# R: the run directory. (Run before 2026-12-06's rename of training.two_stage's directory
+# over a given first stage: the runs were made as two_stage_s0 and two_stage_s0_2, named
+# then by the unused --seed; today they are stage2_s0 and stage2_s1.)
 set -e
 cd "$(dirname "$0")/../../../.."
 O=training/results/route_runs/keepout_split
 H=training/results/route_runs/mirror_hour
 R=${R:-/tmp/runs/kosplit}
 mkdir -p $R
-if [ ! -d $R/runs/two_stage_s0 ]; then
+if [ ! -d $R/runs/stage2_s0 ]; then
   .venv/bin/python -m training.two_stage --stage1-model $H/model/mh_stage1.zip \
     --stage1-spent 2406 --stage2 training/configs/ppo_residual_detour_only_finetune.yml \
     --stage2-seed 0 --out $R/runs > $R/train.log 2>&1
 fi
-S2=$R/runs/two_stage_s0/stage2/
-cp ${S2}learning_curve.csv ${S2}config.yml $R/runs/two_stage_s0/timing.json $O/
+S2=$R/runs/stage2_s0/stage2/
+cp ${S2}learning_curve.csv ${S2}config.yml $R/runs/stage2_s0/timing.json $O/
 M=$R/models
 LIKE=policies/pretrained/ppo_residual.yml
 .venv/bin/python -m training.candidate $H/model/mh_stage1.zip --like $LIKE --name s1 --out $M
@@ -54,7 +56,7 @@ done
 .venv/bin/python -m training.two_stage --stage1-model $H/model/mh_stage1.zip \
   --stage1-spent 2406 --stage2 training/configs/ppo_residual_detour_only_finetune.yml \
   --stage2-seed 1 --out $R/runs > $R/train_s1.log 2>&1
-.venv/bin/python -m training.candidate $R/runs/two_stage_s0_2/stage2/ppo.zip --like $LIKE \
+.venv/bin/python -m training.candidate $R/runs/stage2_s1/stage2/ppo.zip --like $LIKE \
   --name ks1_final --out $M
 .venv/bin/python benchmarks/detour_shorts.py --first 1000 --count 124 --policies ungated \
   --agent $M/ks1_final.zip --jobs 2 --out benchmarks/results/detour_shorts_ks1_final.jsonl
