@@ -50,3 +50,8 @@ done
   --reuse training/results/surrogate --out $O/surrogate --jobs 2 > $O/surrogate.log 2>&1
 # Kept: each evaluation's episodes.csv and results.md; model/ holds lstm_final, so its rows
 # play again: cnt-evaluate --models training/results/route_runs/lstm_two40_s1/model ...
+# Then (as run) a third physics neither network trained on: the model's law on a rod of
+# delta_bar 0.33 (81 episodes in 302 s).
+.venv/bin/cnt-evaluate --config training/configs/ppo_residual_linear033.yml \
+  --policies scripted,ppo_residual,lstm_final --models $O/model policies/pretrained \
+  --out $O/linear033 --jobs 2 > $O/linear033.log 2>&1
