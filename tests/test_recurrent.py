@@ -11,6 +11,7 @@ import pytest
 
 from policies import load_policy
 from policies.sb3 import (
+    ALGOS,
     UntrustedModelError,
     algo_class,
     algo_of,
@@ -57,6 +58,17 @@ def test_the_algorithm_is_read_from_the_name_longest_first(tmp_path: Path) -> No
     assert algo_class("ppo_lstm").__name__ == "RecurrentPPO"
     with pytest.raises(ValueError, match="unknown algorithm"):
         algo_class("a2c")
+
+
+def test_every_algorithm_has_a_default_config() -> None:
+    """cnt-train --algo A without --config reads a config that exists; ppo_lstm's is the
+    recurrent recipe, whose policy is an LSTM one."""
+    from training.common import CONFIG_DIR, load_config
+    from training.train import DEFAULT_CONFIG
+
+    for algo in ALGOS:
+        config = load_config(CONFIG_DIR / DEFAULT_CONFIG.get(algo, f"{algo}.yml"))
+        assert ("Lstm" in config["policy"]) == (algo == "ppo_lstm"), algo
 
 
 def test_a_recurrent_run_saves_a_model_that_loads_safely_and_as_trusted(lstm_model: Path) -> None:

@@ -1,6 +1,6 @@
-"""Train PPO or SAC on CNTDeposit-v0 (``cnt-train``).
+"""Train PPO, SAC or a recurrent PPO on CNTDeposit-v0 (``cnt-train``).
 
-    cnt-train --algo ppo [--config training/configs/ppo.yml] [--seed 0]
+    cnt-train --algo ppo|sac|ppo_lstm [--config training/configs/ppo.yml] [--seed 0]
               [--n-timesteps N] [--max-wall-seconds S] [--out runs/] [--n-envs 2]
               [--trained-agent runs/ppo_s0/ppo.zip [--new-base-options]]
 
@@ -426,13 +426,19 @@ def _write_learning_curve(run: Path) -> None:
             w.writerow([int(t), float(np.mean(r)), float(np.std(r)), float(np.mean(n))])
 
 
+#: the config of ``--algo`` without ``--config`` where it is not ``<algo>.yml``: the
+#: recurrent policy's only measured config (training/results/route_runs/lstm_two40_s1/)
+DEFAULT_CONFIG = {"ppo_lstm": "ppo_lstm_residual_recipe.yml"}
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cnt-train", description=__doc__.split("\n\n")[0],
                                 formatter_class=DefaultsHelp)  # fmt: skip
     p.add_argument("--algo", choices=ALGOS, required=True,
                    help="algorithm (ppo_lstm: sb3-contrib's RecurrentPPO)")  # fmt: skip
     p.add_argument("--config", type=Path, default=None,
-                   help="rl-zoo style YAML (default: training/configs/<algo>.yml)")  # fmt: skip
+                   help="rl-zoo style YAML (default: training/configs/<algo>.yml; for "
+                        "ppo_lstm ppo_lstm_residual_recipe.yml)")  # fmt: skip
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the model and the envs")
     p.add_argument("--n-timesteps", type=positive_int, default=None,
                    help="override n_timesteps")  # fmt: skip
@@ -466,7 +472,8 @@ def check_config(config: dict[str, Any]) -> None:
 def _resolved_config(args: argparse.Namespace) -> dict[str, Any]:
     """The config with the command line's overrides, checked (ValueError saying what is
     wrong): the run's numbers, the callbacks, the curriculum and a --trained-agent."""
-    config = load_config(args.config or CONFIG_DIR / f"{args.algo}.yml")
+    default = CONFIG_DIR / DEFAULT_CONFIG.get(args.algo, f"{args.algo}.yml")
+    config = load_config(args.config or default)
     if args.n_timesteps is not None:
         config["n_timesteps"] = args.n_timesteps
     if args.n_envs is not None:
