@@ -393,9 +393,10 @@ def algo_class(algo: str):
         return RecurrentPPO
     from stable_baselines3 import PPO, SAC
 
-    if algo not in ("ppo", "sac"):
+    classes = {"ppo": PPO, "sac": SAC}
+    if algo not in classes:
         raise ValueError(f"unknown algorithm {algo!r}; one of {ALGOS}")
-    return {"ppo": PPO, "sac": SAC}[algo]
+    return classes[algo]
 
 
 def model_config(model_path: Path) -> Any:

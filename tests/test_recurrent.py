@@ -17,7 +17,7 @@ from policies.sb3 import (
     algo_of,
     safe_custom_objects,
 )
-from tests.test_training import SMALL, _tiny_config
+from tests.test_training import _episode, _tiny_config
 
 pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
@@ -33,22 +33,6 @@ def lstm_model(tmp_path_factory: pytest.TempPathFactory, temp_warm_cache) -> Pat
 
     out = tmp_path_factory.mktemp("lstm")
     return train("ppo_lstm", _lstm_config(), out / "run", seed=5, progress_bar=False)
-
-
-def _episode(policy, seed: int, steps: int = 6) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    from training.common import make_env
-
-    env = make_env(SMALL, 30)
-    obs, _ = env.reset(seed=seed, options={"target": "jog"})
-    policy.reset(seed)
-    observations, actions = [], []
-    for _ in range(steps):
-        a = policy.act(obs)
-        observations.append(obs)
-        actions.append(a)
-        obs, *_ = env.step(a)
-    env.close()
-    return observations, actions
 
 
 def test_the_algorithm_is_read_from_the_name_longest_first(tmp_path: Path) -> None:
@@ -80,7 +64,7 @@ def test_a_recurrent_run_saves_a_model_that_loads_safely_and_as_trusted(lstm_mod
         safe_custom_objects(lstm_model, "ppo")
     safe, trusted = load_policy(lstm_model), load_policy(lstm_model, trust=True)
     assert safe.recurrent and trusted.recurrent
-    assert np.array_equal(np.array(_episode(safe, 3)[1]), np.array(_episode(trusted, 3)[1]))
+    assert np.array_equal(np.array(_episode(safe, 3, 6)[1]), np.array(_episode(trusted, 3, 6)[1]))
 
 
 def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_model: Path) -> None:
@@ -88,7 +72,7 @@ def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_mode
     ``episode_start`` true at the first step only; the same observation gives another
     action once the state has moved; a new episode (reset) starts from a zero state."""
     policy = load_policy(lstm_model)
-    observations, actions = _episode(policy, 3)
+    observations, actions = _episode(policy, 3, 6)
     model, stats = policy.model, policy.vecnormalize
     state, ref = None, []
     for i, o in enumerate(observations):
@@ -101,13 +85,13 @@ def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_mode
     again = policy.act(observations[0])
     assert not np.array_equal(again, actions[0]), "the LSTM state should change the action"
     # and after reset the episode is played again bit for bit
-    assert np.array_equal(np.array(_episode(policy, 3)[1]), np.array(actions))
+    assert np.array_equal(np.array(_episode(policy, 3, 6)[1]), np.array(actions))
 
 
 def test_a_recurrent_run_is_deterministic_in_its_seed(tmp_path: Path, lstm_model: Path) -> None:
     from training.train import train
 
     again = train("ppo_lstm", _lstm_config(), tmp_path / "again", seed=5, progress_bar=False)
-    a = np.array(_episode(load_policy(lstm_model), 4)[1])
-    b = np.array(_episode(load_policy(again), 4)[1])
+    a = np.array(_episode(load_policy(lstm_model), 4, 6)[1])
+    b = np.array(_episode(load_policy(again), 4, 6)[1])
     assert np.array_equal(a, b)

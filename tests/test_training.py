@@ -44,19 +44,26 @@ def _tiny_config() -> dict:
     }  # fmt: skip
 
 
-def _actions(model_path: Path) -> np.ndarray:
+def _episode(policy, seed: int, steps: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The observations and actions of ``policy`` (reset first) over ``steps`` control
+    steps of the small rod's "jog" target from reset seed ``seed``."""
     from training.common import make_env
 
-    policy = load_policy(model_path)
     env = make_env(SMALL, 30)
-    obs, _ = env.reset(seed=3, options={"target": "jog"})
-    out = []
-    for _ in range(8):
+    obs, _ = env.reset(seed=seed, options={"target": "jog"})
+    policy.reset(seed)
+    observations, actions = [], []
+    for _ in range(steps):
         a = policy.act(obs)
-        out.append(a)
+        observations.append(obs)
+        actions.append(a)
         obs, *_ = env.step(a)
     env.close()
-    return np.array(out)
+    return observations, actions
+
+
+def _actions(model_path: Path) -> np.ndarray:
+    return np.array(_episode(load_policy(model_path), 3, 8)[1])
 
 
 def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
