@@ -178,7 +178,9 @@ def test_substrate_keyword_maps_to_kappa_c() -> None:
      dict(difficulty=[0.8, 0.2]), dict(difficulty=[0.0, 1.5]), dict(difficulty="hard"),
      dict(difficulty=[0.1, math.nan]), dict(trace_window=0.0),
      dict(score="corridor", families=("zigzag",)), dict(delta_bar=5e-324),
-     dict(flow_gain=0.0), dict(flow_gain=math.nan), dict(vbar=0.3, flow_gain=2.0)],
+     dict(flow_gain=0.0), dict(flow_gain=math.nan), dict(vbar=0.3, flow_gain=2.0),
+     dict(flow_gain=[2.0, 1.0]), dict(flow_gain=[1.0]), dict(flow_gain=[0.0, 1.0]),
+     dict(vbar=0.2, flow_gain=[1.0, 2.0])],
 )  # fmt: skip
 def test_bad_keywords_raise(bad: dict) -> None:
     with pytest.raises(ValueError):
@@ -317,6 +319,28 @@ def test_flow_gain_scales_the_simulated_flow_only(kw: dict) -> None:
     np.testing.assert_array_equal(gained.unwrapped.sim.rod.flow, wide.unwrapped.sim.rod.flow)
     # the warm start's vbar is the simulated flow: up to vbar_max x flow_gain
     assert CNTDepositEnv(**{**SMALL, "vbar": 0.2, "flow_gain": 2.0}).params.vbar == 0.2
+
+
+def test_flow_gain_range_draws_each_episode_its_own_gain(kw: dict) -> None:
+    """flow_gain [lo, hi]: each reset draws a gain log-uniformly from np_random (the same
+    seed, the same gain), and the episode is, bit for bit, the env of that fixed gain."""
+    ranged = make(kw, flow_gain=[1.0, 2.0])
+    gains = [ranged.reset(seed=s)[1]["flow_gain"] for s in range(6)]
+    assert all(1.0 <= g <= 2.0 for g in gains) and len(set(gains)) == 6
+    assert gains == [ranged.reset(seed=s)[1]["flow_gain"] for s in range(6)]
+    # a one-point range is the fixed gain, with no draw
+    assert make(kw, flow_gain=[1.5, 1.5]).unwrapped.flow_gain_range is None
+    acts = actions(3, 6)
+    ra = rollout(ranged, acts, seed=3)
+    fixed = make(kw, flow_gain=ra[0][1]["flow_gain"])
+    rb = rollout(fixed, acts, seed=3)
+    for i, (sa, sb) in enumerate(zip(ra, rb, strict=True)):
+        if len(sa) == 2:  # the draw comes after the reset's own draws: same start
+            assert_same(sa[0], sb[0], f"reset {i} obs")
+        else:
+            assert_same(sa[:4], sb[:4], f"step {i}")
+    ranged.close()
+    fixed.close()
 
 
 def test_pickled_env_continues_identically(kw: dict) -> None:

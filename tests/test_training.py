@@ -29,6 +29,8 @@ SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml",
                  "ppo_residual_detour_mirror_finetune.yml",
                  "ppo_residual_detour_symgate_finetune.yml",
                  "ppo_lstm_residual_detour_finetune.yml")  # fmt: skip
+# second stages whose flow gain is drawn per episode (evaluated on the calibrated surrogate)
+GAINRAND_SECOND_STAGES = ("ppo_lstm_residual_gainrand_detour_finetune.yml",)
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
@@ -474,6 +476,29 @@ def test_learning_curve_panels_part_runs_trained_on_different_envs(tmp_path: Pat
     assert labels == ["printed law, δ̄ 1", "printed law, δ̄ 1, flow x1.44, detour 2 in 3"]
 
 
+def test_eval_env_kwargs_override_the_training_env_for_evaluation_only() -> None:
+    """HeldOutEval's env_kwargs: the evaluation env is the training env with them over it
+    (a fixed flow gain where training draws one per episode); without them, the same env.
+    The curve label names the evaluation env, whose baselines the curve is drawn with."""
+    from training.common import env_settings, eval_env_settings
+    from training.evaluate import _env_label
+
+    train_kw = {"drag_law": "printed", "delta_bar": 1.0, "flow_gain": [1.0, 2.0],
+                "max_episode_steps": 300}  # fmt: skip
+    ev = {"eval_targets": ["validation"], "env_kwargs": {"flow_gain": 1.44}}
+    cfg = {"env_kwargs": train_kw, "callback": [{"training.callbacks.HeldOutEval": ev}]}
+    assert env_settings(cfg)[0]["flow_gain"] == [1.0, 2.0]
+    assert eval_env_settings(cfg) == ({"drag_law": "printed", "delta_bar": 1.0,
+                                       "flow_gain": 1.44}, 300)  # fmt: skip
+    assert _env_label(cfg) == "printed law, δ̄ 1, flow x1.44"
+    del ev["env_kwargs"]
+    assert eval_env_settings(cfg) == env_settings(cfg)
+    assert _env_label(cfg) == "printed law, δ̄ 1, flow x1-2"
+    ev["env_kwargs"] = {"max_episode_steps": 10}
+    with pytest.raises(ValueError, match="max_episode_steps"):
+        eval_env_settings(cfg)
+
+
 def test_learning_curves_on_validation_routes_get_their_own_baselines(tmp_path: Path) -> None:
     """A run evaluated on validation routes is drawn with the follower and random scored
     on those same routes, not with held-out rows; cnt-evaluate caches them in its own
@@ -737,10 +762,16 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_detour_only_finetune.yml is the shipped detour stage drawing detours
     only (a keep-out split's specialist); ppo_lstm_residual_recipe.yml and
     ppo_lstm_residual_detour_finetune.yml are the shipped recipe's two stages with a
-    recurrent policy."""
+    recurrent policy, and their *_gainrand_* twins draw the flow gain per episode."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
-    from training.common import curriculum_settings, env_settings, load_config, make_env
+    from training.common import (
+        curriculum_settings,
+        env_settings,
+        eval_env_settings,
+        load_config,
+        make_env,
+    )
 
     root = Path(__file__).resolve().parents[1]
     configs = sorted((root / "training" / "configs").glob("*.yml"))
@@ -779,7 +810,13 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             physics = (base.config.drag_law, base.params.delta_bar)
             assert physics == expected.get(twin_of, surrogate), path.name
             calibrated = twin_of == "ppo_residual_calibrated.yml" or path.name in calibrated_share
-            if calibrated or shipped_last_stage:
+            if "_gainrand_" in path.name:  # the gain drawn per episode, evaluated at 1.44
+                assert base.flow_gain_range == (1.0, 2.0), path.name
+                ev_env = make_env(*eval_env_settings(config))
+                ev = ev_env.unwrapped
+                assert (ev.flow_gain_range, ev.flow_gain, ev.n_substeps) == (None, 1.44, 99)
+                ev_env.close()
+            elif calibrated or shipped_last_stage:
                 assert (base.flow_gain, base.n_substeps) == (1.44, 99)
             else:
                 assert base.flow_gain == 1.0, path.name
@@ -788,7 +825,7 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
             assert base.difficulty == ((0.25, 1.0) if ranged else 0.5), path.name
             if suffix is not None:  # the detour family repeated in the drawn families
                 assert share == detour_share[suffix], path.name
-            elif shipped_last_stage:
+            elif shipped_last_stage or path.name in GAINRAND_SECOND_STAGES:
                 assert share == (3, 10), path.name
             elif path.name in calibrated_share:
                 assert share == calibrated_share[path.name], path.name

@@ -47,6 +47,7 @@ __all__ = [
     "csv_list",
     "curriculum_settings",
     "env_settings",
+    "eval_env_settings",
     "eval_settings",
     "fresh_dir",
     "held_out_names",
@@ -160,6 +161,19 @@ def env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
 def callback_settings(config: dict[str, Any], name: str) -> dict[str, Any] | None:
     """The kwargs of callback ``name`` in the config's ``callback`` list (None if absent)."""
     return zoo_entry(config.get("callback"), name)
+
+
+def eval_env_settings(config: dict[str, Any]) -> tuple[dict[str, Any], int]:
+    """``(env_kwargs, max_episode_steps)`` of a config's evaluation env: the training
+    env's (:func:`env_settings`), with HeldOutEval's own ``env_kwargs`` over them (say a
+    fixed ``flow_gain`` where training draws one per episode, so that every evaluation
+    scores the same envs)."""
+    env_kwargs, steps = env_settings(config)
+    ev = callback_settings(config, EVAL_CALLBACK) or {}
+    over = dict(ev.get("env_kwargs") or {})
+    if "max_episode_steps" in over:
+        raise ValueError("HeldOutEval's env_kwargs set the env, not max_episode_steps")
+    return {**env_kwargs, **over}, steps
 
 
 def eval_settings(config: dict[str, Any]) -> dict[str, Any]:

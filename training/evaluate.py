@@ -81,6 +81,7 @@ from .common import (
     check_dir_option,
     csv_list,
     env_settings,
+    eval_env_settings,
     eval_settings,
     fresh_dir,
     held_out_names,
@@ -520,7 +521,7 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
                 return {p: float(data["scores"][p]) for p in policies}
         except (ValueError, KeyError, TypeError):
             pass  # rebuilt below
-    env_kwargs, max_steps = env_settings(cfg)
+    env_kwargs, max_steps = eval_env_settings(cfg)
     scores = {}
     for p in policies:
         env = HeldOutCycle(make_env(env_kwargs, max_steps), targets)
@@ -541,12 +542,15 @@ def _env_label(cfg: dict[str, Any]) -> str:
     """The training env a run's EvalCallback ran on, in short: its physics (the env's
     default, the model, unless the config sets the drag law, delta_bar or a flow gain) and
     whether its routes are drawn from a weighted list of families."""
-    kw = env_settings(cfg)[0]
+    kw = eval_env_settings(cfg)[0]
     parts = [f"{kw['drag_law']} law" if "drag_law" in kw else "model law"]
     if "delta_bar" in kw:
         parts.append(f"δ̄ {kw['delta_bar']:g}")
-    if float(kw.get("flow_gain", 1.0)) != 1.0:
-        parts.append(f"flow x{kw['flow_gain']:g}")
+    gain = kw.get("flow_gain", 1.0)
+    if isinstance(gain, (list, tuple)):
+        parts.append(f"flow x{gain[0]:g}-{gain[1]:g}")
+    elif float(gain) != 1.0:
+        parts.append(f"flow x{gain:g}")
     if kw.get("families"):
         fams = list(kw["families"])
         parts.append(f"detour {fams.count('detour')} in {len(fams)}")

@@ -78,6 +78,7 @@ from .common import (
     check_run_config,
     curriculum_settings,
     env_settings,
+    eval_env_settings,
     eval_settings,
     fresh_dir,
     limit_threads,
@@ -230,7 +231,7 @@ def train(
     if stages:
         callbacks.append(make_curriculum([(int(at * total), d) for at, d in stages]))
     # validation routes: drawn as the end of the curriculum draws them (the one aimed at)
-    eval_kwargs = dict(env_kwargs)
+    eval_kwargs = eval_env_settings(config)[0]
     for _, draw in stages:
         eval_kwargs.update(draw)
     ev = eval_settings(config)

@@ -183,7 +183,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     with the configured flow ``vbar``, ``phi``), computed once, cached on disk
     (``cache_dir``, ``$CNT_ENV_CACHE_DIR`` or the user cache) and restored exactly at every
     reset (with ``start_mirror``, its mirror image in z under the mirrored flow;
-    ``info["start_mirrored"]``); then a random advance in [0, ``reset_advance`` ·
+    ``info["start_mirrored"]``; with a ``flow_gain`` range, the episode's gain is drawn,
+    ``info["flow_gain"]``); then a random advance in [0, ``reset_advance`` ·
     ``control_interval``). The
     target is placed at the contact point: drawn from ``families`` at ``difficulty`` with
     ``np_random`` (or, with ``route_file``, one of that file's routes, uniformly), or
@@ -224,7 +225,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     |                    |              | {"contact": {"adhesion": "cohesive"}}           |
     | `vbar_max`         | 0.13         | flow speed cap (e_v / (mu H))                   |
     | `flow_gain`        | 1.0          | simulated / commanded flow speed (calibrates a  |
-    |                    |              | surrogate's kinematics to the model's)          |
+    |                    |              | surrogate's kinematics to the model's); or      |
+    |                    |              | [lo, hi]: each episode's own, log-uniformly     |
+    |                    |              | (np_random; info["flow_gain"] at reset)         |
     | `control_interval` | 30 / 1.5 H̄   | simulated time per step (tau), whole dt's       |
     | `warmup_length`    | H̄            | trace laid to reach the warm state (L_vb)       |
     | `warmup_seed`      | 0            | seed of the start-up perturbation (int >= 0)    |
@@ -310,7 +313,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         drag_law: str = MODEL["drag_law"],
         sim_options: Mapping[str, Any] | None = None,
         vbar_max: float = DEFAULT_VBAR_MAX,
-        flow_gain: float = 1.0,
+        flow_gain: float | Sequence[float] = 1.0,
         control_interval: float | None = None,
         warmup_length: float | None = None,
         warmup_seed: int = 0,
@@ -350,7 +353,11 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             sim_options, dt=dt, coarse_delta=coarse_delta, initial_radius=initial_radius,
         )  # fmt: skip
         self.vbar_max = s.positive("vbar_max", vbar_max)
-        self.flow_gain = s.positive("flow_gain", flow_gain)
+        gain = s.gain_value(flow_gain)
+        #: The range each episode draws its gain from (None: the gain is fixed).
+        self.flow_gain_range: tuple[float, float] | None = gain if isinstance(gain, tuple) else None
+        #: The episode's gain (the range's low end before the first reset).
+        self.flow_gain = gain[0] if isinstance(gain, tuple) else gain
         if self.params.vbar > self.vbar_max * self.flow_gain:
             raise ValueError(f"vbar = {self.params.vbar} exceeds vbar_max x flow_gain = "
                              f"{self.vbar_max * self.flow_gain}")  # fmt: skip
@@ -496,6 +503,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             except SimulationError:
                 sim.restore(warm)  # start from the warm state itself
                 advance = 0.0
+        if self.flow_gain_range is not None:  # drawn only for a range, as start_mirror
+            lo, hi = np.log(self.flow_gain_range)
+            self.flow_gain = float(np.exp(self.np_random.uniform(lo, hi)))
         phi = -self.params.phi if mirrored else self.params.phi
         self._flow = (self.params.vbar / self.flow_gain, phi)  # as commanded
         self._begin_episode(target)
@@ -506,6 +516,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self._info(metrics, dict.fromkeys(self._reward_keys, 0.0), 0, 0)
         info["reset_advance"] = advance
         info["start_mirrored"] = mirrored
+        info["flow_gain"] = self.flow_gain
         if self.render_mode == "human":
             self.render()
         return obs, info

@@ -32,6 +32,7 @@ __all__ = [
     "deposition_config",
     "difficulty_value",
     "families_tuple",
+    "gain_value",
     "mapping_or_none",
     "non_negative",
     "optional_path",
@@ -130,6 +131,20 @@ def difficulty_value(value: Any) -> float | tuple[float, float]:
             raise ValueError(f"a difficulty range [lo, hi] needs lo <= hi, got {value!r}")
         return (lo, hi) if lo < hi else lo
     return _difficulty_number(value, value)
+
+
+def gain_value(value: Any) -> float | tuple[float, float]:
+    """Flow gain: a number > 0, or a range ``[lo, hi]`` (0 < lo <= hi) from which each
+    episode draws its own gain, log-uniformly (``np_random``): domain randomization of a
+    surrogate's kinematics, whose drift per commanded flow then differs episode to episode."""
+    if isinstance(value, (list, tuple)):
+        if len(value) != 2:
+            raise ValueError(f"a flow_gain range is [lo, hi], got {value!r}")
+        lo, hi = (positive("flow_gain", v) for v in value)
+        if lo > hi:
+            raise ValueError(f"a flow_gain range [lo, hi] needs lo <= hi, got {value!r}")
+        return (lo, hi) if lo < hi else lo
+    return positive("flow_gain", value)
 
 
 def _difficulty_number(value: Any, given: Any) -> float:
