@@ -65,5 +65,6 @@ cp $M/* $O/model/
   --out $O/surrogate_calibrated_here --jobs 2 > $O/surrogate_calibrated_here.log 2>&1
 # Then (as run) the training throughput of the fixed-gain first stage on this machine,
 # for the sample count (README.md, "Training"): 7 568 steps in 305 s.
+mkdir -p /tmp/tput
 .venv/bin/cnt-train --algo ppo_lstm --config training/configs/ppo_lstm_residual_recipe.yml \
   --seed 1 --max-wall-seconds 300 --vec-env subproc --out /tmp/tput > /tmp/tput/log 2>&1
