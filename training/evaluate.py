@@ -539,9 +539,10 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
 
 
 def _env_label(cfg: dict[str, Any]) -> str:
-    """The training env a run's EvalCallback ran on, in short: its physics (the env's
-    default, the model, unless the config sets the drag law, delta_bar or a flow gain) and
-    whether its routes are drawn from a weighted list of families."""
+    """The env a run's EvalCallback ran on (:func:`eval_env_settings`), in short: its
+    physics (the env's default, the model, unless the config sets the drag law, delta_bar
+    or a flow gain, a range if drawn per episode) and whether its routes are drawn from a
+    weighted list of families."""
     kw = eval_env_settings(cfg)[0]
     parts = [f"{kw['drag_law']} law" if "drag_law" in kw else "model law"]
     if "delta_bar" in kw:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -123,28 +123,29 @@ def families_tuple(value: Any, known: Mapping[str, Any]) -> tuple[str, ...]:
 def difficulty_value(value: Any) -> float | tuple[float, float]:
     """Route difficulty: a number in [0, 1], or a range ``[lo, hi]`` in [0, 1] (lo <= hi)
     from which each drawn route takes its own difficulty, uniformly (``np_random``)."""
-    if isinstance(value, (list, tuple)):
-        if len(value) != 2:
-            raise ValueError(f"a difficulty range is [lo, hi], got {value!r}")
-        lo, hi = (_difficulty_number(v, value) for v in value)
-        if lo > hi:
-            raise ValueError(f"a difficulty range [lo, hi] needs lo <= hi, got {value!r}")
-        return (lo, hi) if lo < hi else lo
-    return _difficulty_number(value, value)
+    return _number_or_range("difficulty", value, lambda v: _difficulty_number(v, value))
 
 
 def gain_value(value: Any) -> float | tuple[float, float]:
     """Flow gain: a number > 0, or a range ``[lo, hi]`` (0 < lo <= hi) from which each
     episode draws its own gain, log-uniformly (``np_random``): domain randomization of a
     surrogate's kinematics, whose drift per commanded flow then differs episode to episode."""
+    return _number_or_range("flow_gain", value, lambda v: positive("flow_gain", v))
+
+
+def _number_or_range(
+    name: str, value: Any, number: Callable[[Any], float]
+) -> float | tuple[float, float]:
+    """``number(value)``, or for a list/tuple a range ``(lo, hi)`` of two such numbers with
+    lo <= hi; a range of one point is that number."""
     if isinstance(value, (list, tuple)):
         if len(value) != 2:
-            raise ValueError(f"a flow_gain range is [lo, hi], got {value!r}")
-        lo, hi = (positive("flow_gain", v) for v in value)
+            raise ValueError(f"a {name} range is [lo, hi], got {value!r}")
+        lo, hi = (number(v) for v in value)
         if lo > hi:
-            raise ValueError(f"a flow_gain range [lo, hi] needs lo <= hi, got {value!r}")
+            raise ValueError(f"a {name} range [lo, hi] needs lo <= hi, got {value!r}")
         return (lo, hi) if lo < hi else lo
-    return positive("flow_gain", value)
+    return number(value)
 
 
 def _difficulty_number(value: Any, given: Any) -> float:
