@@ -2,7 +2,7 @@
 bit-identical same-seed rollouts, pickling, action clipping and rejection, the reward
 decomposition, vector envs, the warm-start cache, and a hypothesis fuzz.
 
-Everything runs on a small rod (Hbar = 30, a 3 L_vb warm-up, 10 physics steps per
+Everything runs on the small rod of tests/smallrod.py (Hbar = 30, 10 physics steps per
 control step) with the warm-state cache in a temporary directory. The default
 configuration (the paper's serpentine baseline) is only constructed, not stepped.
 """
@@ -33,13 +33,11 @@ from cnt_env.sim import warmstart
 from cnt_env.sim.stepper import SimulationError
 from cnt_env.task import targets as T
 from cnt_env.task.env import CNTDepositEnv, flow_from_action
+from tests.smallrod import small
 
 ENV_ID = "CNTDeposit-v0"
-# small rod: dt = 0.05 Hbar = 1.5 tau, so control_interval = 15 tau is 10 physics steps
 # the v0 contract runs on the thin task (score="thin"); the route task has its own tests
-SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
-             control_interval=15.0, reset_advance=2.0, pattern_every=10,
-             sim_options={"dt_factor": 0.05}, score="thin")  # fmt: skip
+SMALL = small(pattern_every=10, score="thin")
 REWARD_KEYS = ("reward_coverage", "reward_precision", "reward_progress", "reward_failure")
 
 # Warnings the checkers may raise that are not defects of this env, as (message

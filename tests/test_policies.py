@@ -23,13 +23,12 @@ from policies import (
 )
 from policies.constant import record_constant, score_trace
 from policies.scripted import amplitude_curve
+from tests.smallrod import small
 
 # A small, fast env. Sliding "B" (x fixed at touchdown): under the default "C" laid nodes
 # still move in x until they snap, and the env's monotone score terms (coverage, furthest
 # point) then differ from an offline score of the final trace by design.
-SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
-             control_interval=15.0, reset_advance=2.0, pattern_every=0,
-             sim_options={"dt_factor": 0.05, "sliding": "B"}, score="thin")  # fmt: skip
+SMALL = small(score="thin", sliding="B")
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)

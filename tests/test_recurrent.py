@@ -17,13 +17,13 @@ from policies.sb3 import (
     algo_of,
     safe_custom_objects,
 )
-from tests.test_training import _episode, _tiny_config
+from tests.smallrod import play, tiny_config
 
 pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
 def _lstm_config() -> dict:
-    return {**_tiny_config(), "n_timesteps": 64, "policy": "MlpLstmPolicy",
+    return {**tiny_config(), "n_timesteps": 64, "policy": "MlpLstmPolicy",
             "policy_kwargs": {"net_arch": [16], "lstm_hidden_size": 8}}  # fmt: skip
 
 
@@ -64,7 +64,7 @@ def test_a_recurrent_run_saves_a_model_that_loads_safely_and_as_trusted(lstm_mod
         safe_custom_objects(lstm_model, "ppo")
     safe, trusted = load_policy(lstm_model), load_policy(lstm_model, trust=True)
     assert safe.recurrent and trusted.recurrent
-    assert np.array_equal(np.array(_episode(safe, 3, 6)[1]), np.array(_episode(trusted, 3, 6)[1]))
+    assert np.array_equal(np.array(play(safe, 3, 6)[1]), np.array(play(trusted, 3, 6)[1]))
 
 
 def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_model: Path) -> None:
@@ -72,7 +72,7 @@ def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_mode
     ``episode_start`` true at the first step only; the same observation gives another
     action once the state has moved; a new episode (reset) starts from a zero state."""
     policy = load_policy(lstm_model)
-    observations, actions = _episode(policy, 3, 6)
+    observations, actions = play(policy, 3, 6)
     model, stats = policy.model, policy.vecnormalize
     state, ref = None, []
     for i, o in enumerate(observations):
@@ -85,13 +85,13 @@ def test_the_lstm_state_is_carried_within_an_episode_and_reset_between(lstm_mode
     again = policy.act(observations[0])
     assert not np.array_equal(again, actions[0]), "the LSTM state should change the action"
     # and after reset the episode is played again bit for bit
-    assert np.array_equal(np.array(_episode(policy, 3, 6)[1]), np.array(actions))
+    assert np.array_equal(np.array(play(policy, 3, 6)[1]), np.array(actions))
 
 
 def test_a_recurrent_run_is_deterministic_in_its_seed(tmp_path: Path, lstm_model: Path) -> None:
     from training.train import train
 
     again = train("ppo_lstm", _lstm_config(), tmp_path / "again", seed=5, progress_bar=False)
-    a = np.array(_episode(load_policy(lstm_model), 4, 6)[1])
-    b = np.array(_episode(load_policy(again), 4, 6)[1])
+    a = np.array(play(load_policy(lstm_model), 4, 6)[1])
+    b = np.array(play(load_policy(again), 4, 6)[1])
     assert np.array_equal(a, b)

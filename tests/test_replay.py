@@ -5,7 +5,7 @@ Recordings are written to temporary ``.rrd`` files and read back with
 the logged reward equal to what ``step`` returned, no wall-clock timeline. Tests that
 need rerun (the optional ``[rerun]`` extra) take the ``rr`` fixture and are skipped
 without it; the env must never import rerun, and the episode file needs no rerun, so
-those tests always run. The env is the small one of test_env.py.
+those tests always run. The env is the small rod of tests/smallrod.py.
 """
 
 from __future__ import annotations
@@ -29,11 +29,10 @@ from cnt_env.replay import (
     load_episode,
     save_episode,
 )
+from tests.smallrod import small
 
 ENV_ID = "CNTDeposit-v0"
-SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
-             control_interval=15.0, reset_advance=2.0, pattern_every=3,
-             sim_options={"dt_factor": 0.05})  # fmt: skip
+SMALL = small(pattern_every=3)
 N_STEPS = 6  # the time limit of the recorded episodes
 SEED = 7
 # Entities every recorded episode holds (and one "/reward/<term>" per info["reward_<term>"]:

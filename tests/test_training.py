@@ -1,7 +1,7 @@
 """Training and evaluation: a tiny seeded PPO run is deterministic, and evaluate runs on
 one held-out target with the pretrained models and writes the table.
 
-Training runs on the small rod of tests/test_env.py (SMALL); evaluation needs the
+Training runs on the small rod of tests/smallrod.py (SMALL); evaluation needs the
 default physics (the pretrained models' observation statistics) but only a few steps.
 """
 
@@ -16,10 +16,8 @@ import pytest
 import yaml
 
 from policies import PRETRAINED_DIR, load_policy
+from tests.smallrod import SMALL, play, tiny_config
 
-SMALL = dict(Hbar=30.0, Ibar=200.0, initial_radius=4.0, warmup_length=3.0,
-             control_interval=15.0, reset_advance=2.0, pattern_every=0,
-             sim_options={"dt_factor": 0.05})  # fmt: skip
 RESULTS = Path(__file__).resolve().parents[1] / "training" / "results"
 #: goes on training the shipped agent (cnt-train --trained-agent) on the calibrated surrogate
 SHIPPED_FINETUNE = "ppo_residual_shipped_detour_finetune.yml"
@@ -30,49 +28,25 @@ SECOND_STAGES = (SHIPPED_FINETUNE, "ppo_residual_difficulty_range_stage2.yml",
                  "ppo_residual_detour_symgate_finetune.yml",
                  "ppo_lstm_residual_detour_finetune.yml")  # fmt: skip
 # second stages whose flow gain is drawn per episode (evaluated on the calibrated surrogate)
-GAINRAND_SECOND_STAGES = ("ppo_lstm_residual_gainrand_detour_finetune.yml",)
+GAINRAND_SECOND_STAGES = (
+    "ppo_lstm_residual_gainrand_detour_finetune.yml",
+    "ppo_residual_gainrand_detour_finetune.yml",
+)
 
 
 # warm states in a temporary cache, whatever a test forgets to pass (tests/conftest.py)
 pytestmark = pytest.mark.usefixtures("temp_warm_cache")
 
 
-def _tiny_config() -> dict:
-    return {
-        "n_timesteps": 128, "policy": "MlpPolicy", "n_envs": 1, "vec_env": "dummy",
-        "normalize": {"norm_obs": True, "norm_reward": True}, "max_episode_steps": 30,
-        "env_kwargs": SMALL, "n_steps": 64, "batch_size": 32, "n_epochs": 1,
-        "policy_kwargs": {"net_arch": [16, 16]},
-    }  # fmt: skip
-
-
-def _episode(policy, seed: int, steps: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """The observations and actions of ``policy`` (reset first) over ``steps`` control
-    steps of the small rod's "jog" target from reset seed ``seed``."""
-    from training.common import make_env
-
-    env = make_env(SMALL, 30)
-    obs, _ = env.reset(seed=seed, options={"target": "jog"})
-    policy.reset(seed)
-    observations, actions = [], []
-    for _ in range(steps):
-        a = policy.act(obs)
-        observations.append(obs)
-        actions.append(a)
-        obs, *_ = env.step(a)
-    env.close()
-    return observations, actions
-
-
 def _actions(model_path: Path) -> np.ndarray:
-    return np.array(_episode(load_policy(model_path), 3, 8)[1])
+    return np.array(play(load_policy(model_path), 3, 8)[1])
 
 
 def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
     from training.train import train
 
     paths = [
-        train("ppo", _tiny_config(), tmp_path / f"run{i}", seed=seed, progress_bar=False)
+        train("ppo", tiny_config(), tmp_path / f"run{i}", seed=seed, progress_bar=False)
         for i, seed in enumerate((7, 7, 8))
     ]
     for p in paths:
@@ -575,7 +549,7 @@ def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
     from policies.residual import base_options
     from training.train import train
 
-    config = {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+    config = {**tiny_config(), "n_timesteps": 64, "env_wrapper": [
         {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3,
                                             "base_kwargs": {"lead": 0.0}}}]}  # fmt: skip
     model = train("ppo", config, tmp_path / "resid", seed=0, progress_bar=False)
@@ -652,7 +626,7 @@ def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) 
     from training.common import make_env
     from training.train import train
 
-    model = train("ppo", {**_tiny_config(), "n_timesteps": 64, "frame_stack": 3},
+    model = train("ppo", {**tiny_config(), "n_timesteps": 64, "frame_stack": 3},
                   tmp_path / "stack", seed=0, progress_bar=False)  # fmt: skip
     policy = load_policy(model)
     assert policy.frame_stack == 3
@@ -700,7 +674,7 @@ def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_i
     from training.train import train
 
     kwargs = {"base": "scripted", "scale": 1.0, "observe_base": True}
-    config = {**_tiny_config(), "n_timesteps": 64,
+    config = {**tiny_config(), "n_timesteps": 64,
               "env_wrapper": [{"training.common.ResidualAction": kwargs}]}  # fmt: skip
     model_path = train("ppo", config, tmp_path / "resid", seed=0, progress_bar=False)
 
@@ -762,7 +736,8 @@ def test_every_training_config_trains_on_the_surrogate_and_eval_yml_keeps_the_mo
     ppo_residual_detour_only_finetune.yml is the shipped detour stage drawing detours
     only (a keep-out split's specialist); ppo_lstm_residual_recipe.yml and
     ppo_lstm_residual_detour_finetune.yml are the shipped recipe's two stages with a
-    recurrent policy, and their *_gainrand_* twins draw the flow gain per episode."""
+    recurrent policy, and their *_gainrand_* twins (and the MLP pair
+    ppo_residual_gainrand_*) draw the flow gain per episode."""
     from cnt_env.presets import MESH, MODEL, SURROGATE
     from cnt_env.task.routes import FAMILIES
     from training.common import (
@@ -851,7 +826,7 @@ def test_curriculum_switches_the_route_draw_at_its_stages(tmp_path: Path) -> Non
     from training.callbacks import make_curriculum
     from training.common import curriculum_settings, make_env
 
-    config = {**_tiny_config(), "env_kwargs": {**SMALL, "families": ["straight", "detour"]},
+    config = {**tiny_config(), "env_kwargs": {**SMALL, "families": ["straight", "detour"]},
               "callback": [{"training.callbacks.Curriculum": {"stages": [
                   {"at": 0.5, "families": ["arc"], "difficulty": 0.2}]}}]}  # fmt: skip
     stages = curriculum_settings(config)
@@ -921,7 +896,7 @@ def test_a_saved_agent_goes_on_training_from_its_weights_and_statistics(tmp_path
     from policies.sb3 import file_sha256, load_vecnormalize, write_manifest
     from training.train import check_trained_agent, train
 
-    config = {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+    config = {**tiny_config(), "n_timesteps": 64, "env_wrapper": [
         {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3}}]}  # fmt: skip
     first = train("ppo", config, tmp_path / "first", seed=0, progress_bar=False)
     again = train("ppo", {**config, "learning_rate": 0.0}, tmp_path / "again", seed=5,
@@ -1099,7 +1074,7 @@ def test_two_stages_share_one_budget_and_the_second_goes_on_from_the_first(
     from training.two_stage import run_two_stages, stage2_budget
 
     def residual(**base_kwargs: float) -> dict:
-        return {**_tiny_config(), "n_timesteps": 64, "env_wrapper": [
+        return {**tiny_config(), "n_timesteps": 64, "env_wrapper": [
             {"training.common.ResidualAction": {"base": "scripted", "scale": 0.3,
                                                 "base_kwargs": base_kwargs}}]}  # fmt: skip
 
