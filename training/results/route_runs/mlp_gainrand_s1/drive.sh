@@ -66,3 +66,15 @@ for g in 1.0 1.44 2.0; do
   mkdir -p $O/detour_by_gain/gain_$g
   cp /tmp/detour_gain_$g/results.md /tmp/detour_gain_$g/episodes.csv $O/detour_by_gain/gain_$g/
 done
+# Then (as run) the same for lstm_gainrand_s1's final model on its own stage-2 env (the
+# recurrent twin of that config, the gain fixed).
+for g in 1.0 1.44 2.0; do
+  sed "s/flow_gain: \[1.0, 2.0\]/flow_gain: $g/" \
+    training/configs/ppo_lstm_residual_gainrand_detour_finetune.yml > /tmp/lstmenv_gain_$g.yml
+  .venv/bin/cnt-evaluate --config /tmp/lstmenv_gain_$g.yml --policies dr_final \
+    --models training/results/route_runs/lstm_gainrand_s1/model --targets detour_block \
+    --seeds 0,1,2 --jobs 2 --out /tmp/lstm_detour_gain_$g > /dev/null
+  mkdir -p $O/detour_by_gain/lstm_gain_$g
+  cp /tmp/lstm_detour_gain_$g/results.md /tmp/lstm_detour_gain_$g/episodes.csv \
+    $O/detour_by_gain/lstm_gain_$g/
+done
