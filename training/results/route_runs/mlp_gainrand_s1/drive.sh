@@ -78,3 +78,17 @@ for g in 1.0 1.44 2.0; do
   cp /tmp/lstm_detour_gain_$g/results.md /tmp/lstm_detour_gain_$g/episodes.csv \
     $O/detour_by_gain/lstm_gain_$g/
 done
+# Then (as run) a control at equal samples on this machine: the shipped recipe's first
+# stage with its gain fixed, 40 minutes (63 054 steps in 2 404 s), against this run's
+# drawn-gain first stage (59 426 steps), both over the shipped agent's base and gate, held
+# out, seeds 0-2 (README.md, "A control").
+.venv/bin/cnt-train --algo ppo --config training/configs/ppo_residual_recipe_shipped.yml \
+  --seed 1 --vec-env subproc --max-wall-seconds 2400 --out /tmp/runs/mlp_fixed_s1 --no-progress
+cp /tmp/runs/mlp_fixed_s1/ppo_s1/learning_curve.csv $O/fixed_stage1_learning_curve.csv
+.venv/bin/python -m training.candidate /tmp/runs/mlp_fixed_s1/ppo_s1/ppo.zip --like $LIKE \
+  --name mfx_s1 --out /tmp/runs/s1models
+.venv/bin/python -m training.candidate $R/runs/two_stage_s1/stage1/ppo.zip --like $LIKE \
+  --name mdr_s1 --out /tmp/runs/s1models
+.venv/bin/cnt-evaluate --policies mfx_s1,mdr_s1 --models /tmp/runs/s1models \
+  --out $O/stage1_seeds_0-2 --jobs 2 > $O/stage1_seeds_0-2.log 2>&1
+mkdir -p $O/stage1_model && cp /tmp/runs/s1models/* $O/stage1_model/
