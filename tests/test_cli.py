@@ -601,7 +601,7 @@ def test_measure_judges_the_class_on_the_settled_fraction_given(
     is periodic on its settled half (the default) and irregular judged whole (1.0); the
     run's own fraction is used when the flag is absent, and the measure reports it."""
     from cnt_env.io import save_trace
-    from tests.test_patterns import A_BAR, LAMBDA_BAR, serpentine_curve
+    from tests.traces import A_BAR, LAMBDA_BAR, serpentine_curve
 
     steady = 2 * A_BAR - LAMBDA_BAR / 2
     xz = serpentine_curve([steady * (1.0 + 0.8 * math.exp(-k / 5.0)) for k in range(44)],
