@@ -1,0 +1,52 @@
+"""benchmarks/flow_noise.py: its AR(1) flow fluctuation against the closed forms, and a
+zero fluctuation that leaves the table's run bit for bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import flow_noise, reproduce  # the repo root is on pytest's pythonpath
+
+N_SAMPLES = 200_000
+STAT_TOL = 0.03  # ~3x the standard error of the variance and correlations at N_SAMPLES
+
+
+@pytest.mark.parametrize("corr", [5.0, 20.0])
+def test_ar1_is_stationary_with_unit_variance_and_exponential_correlation(corr) -> None:
+    """Var x = 1 and corr(x_k, x_{k+m}) = exp(-m every / corr), the discrete OU process."""
+    every = 2.0
+    x = flow_noise.ar1(np.random.default_rng(3), N_SAMPLES, every, corr)
+    assert np.mean(x) == pytest.approx(0.0, abs=STAT_TOL * math.sqrt(corr / every))
+    assert np.var(x) == pytest.approx(1.0, abs=STAT_TOL * math.sqrt(corr / every))
+    for m in (1, 5):
+        rho = np.corrcoef(x[:-m], x[m:])[0, 1]
+        assert rho == pytest.approx(math.exp(-m * every / corr), abs=STAT_TOL)
+
+
+def test_ar1_is_seeded_and_rejects_bad_scales() -> None:
+    a = flow_noise.ar1(np.random.default_rng(7), 50, 2.0, 20.0)
+    b = flow_noise.ar1(np.random.default_rng(7), 50, 2.0, 20.0)
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="must be > 0"):
+        flow_noise.ar1(np.random.default_rng(0), 5, 2.0, 0.0)
+
+
+def test_no_fluctuation_lays_the_tables_point_bit_for_bit() -> None:
+    """Refreshing the flow every EVERY L_vb at sigma 0 stops and resumes the run between
+    steps and nothing else: the trace is the table's (reproduce.py's point) exactly, so a
+    fluctuation's effect is measured against the committed table."""
+    from cnt_env.sim.deposition import DepositionSim
+
+    deposit = 30.0
+    cfg = reproduce.point_config(reproduce._point("vbar", reproduce.SERP, vbar=0.037),
+                                 "default", None)  # fmt: skip
+    plain = DepositionSim(cfg, seed=0)
+    plain.run(deposit)
+    rec = flow_noise.run_point(0.037, 0.0, 20.0, 0, deposit)
+    assert rec["error"] is None
+    assert rec["deposition_speed"] == plain.deposited_length / plain.time * cfg.params.Hbar
+    noisy = flow_noise.run_point(0.037, 0.15, 20.0, 0, deposit)
+    assert noisy["deposition_speed"] != rec["deposition_speed"]
