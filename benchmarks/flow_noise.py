@@ -21,6 +21,7 @@ none is in the env. It is a measurement of the deterministic model's margin.
 
     python benchmarks/flow_noise.py --jobs 2          # ~25 min on 2 cores
     python benchmarks/flow_noise.py --vbar 0.12 --sigma 0.05 --seeds 0,1
+    python benchmarks/flow_noise.py --vbar                # the table alone (no point)
 
 Results append to benchmarks/results/flow_noise.jsonl (resumable: a point already there
 is not run again) and the table prints.
@@ -112,7 +113,7 @@ def _row(r: dict[str, Any]) -> str:
     def f(x: Any, nd: int = 1) -> str:
         return "-" if x is None else f"{x:.{nd}f}"
 
-    cells = [f"{r['vbar']:g}", f"{r['sigma']:g}", str(r["seed"]), r["pattern"],
+    cells = [f"{r['vbar']:g}", f"{r['sigma']:g}", f"{r['corr']:g}", str(r["seed"]), r["pattern"],
              f(r["amplitude"]), f(r["wavelength_x"]), f(r["settled_amplitude_cv"], 3),
              f(r["settled_wavelength_cv"], 3), str(r["n_loops"]), f"{r['wall_s']:.0f}"]  # fmt: skip
     return "| " + " | ".join(cells) + " |"
@@ -145,9 +146,9 @@ def main(argv: list[str] | None = None) -> int:
                 fh.write(json.dumps(rec) + "\n")
             done[rec["key"]] = rec
             print(_row(rec), flush=True)
-    print("| v̄ | sigma | seed | class | Ā | λ̄_x | settled CV Ā | settled CV λ̄ | loops | wall s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for rec in sorted(done.values(), key=lambda r: (r["vbar"], r["sigma"], r["seed"])):
+    print("| v̄ | sigma | corr | seed | class | Ā | λ̄_x | CV Ā | CV λ̄ | loops | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for rec in sorted(done.values(), key=lambda r: (r["vbar"], r["sigma"], r["corr"], r["seed"])):
         print(_row(rec))
     return 0
 
