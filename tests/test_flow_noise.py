@@ -11,19 +11,24 @@ import pytest
 from benchmarks import flow_noise, reproduce  # the repo root is on pytest's pythonpath
 
 N_SAMPLES = 200_000
-STAT_TOL = 0.03  # ~3x the standard error of the variance and correlations at N_SAMPLES
+N_SE = 5.0  # tolerances: this many standard errors of the estimate (closed forms below)
 
 
 @pytest.mark.parametrize("corr", [5.0, 20.0])
 def test_ar1_is_stationary_with_unit_variance_and_exponential_correlation(corr) -> None:
-    """Var x = 1 and corr(x_k, x_{k+m}) = exp(-m every / corr), the discrete OU process."""
+    """Var x = 1 and corr(x_k, x_{k+m}) = a^m = exp(-m every / corr), the discrete OU
+    process. Standard errors of an AR(1) of N samples: the mean sqrt((1+a)/((1-a)N)), the
+    variance sqrt(2(1+a^2)/((1-a^2)N)), the lag-m correlation <= that of the variance."""
     every = 2.0
+    a = math.exp(-every / corr)
+    se_mean = math.sqrt((1 + a) / ((1 - a) * N_SAMPLES))
+    se_var = math.sqrt(2 * (1 + a * a) / ((1 - a * a) * N_SAMPLES))
     x = flow_noise.ar1(np.random.default_rng(3), N_SAMPLES, every, corr)
-    assert np.mean(x) == pytest.approx(0.0, abs=STAT_TOL * math.sqrt(corr / every))
-    assert np.var(x) == pytest.approx(1.0, abs=STAT_TOL * math.sqrt(corr / every))
+    assert np.mean(x) == pytest.approx(0.0, abs=N_SE * se_mean)
+    assert np.var(x) == pytest.approx(1.0, abs=N_SE * se_var)
     for m in (1, 5):
         rho = np.corrcoef(x[:-m], x[m:])[0, 1]
-        assert rho == pytest.approx(math.exp(-m * every / corr), abs=STAT_TOL)
+        assert rho == pytest.approx(a**m, abs=N_SE * se_var)
 
 
 def test_ar1_is_seeded_and_rejects_bad_scales() -> None:
