@@ -30,7 +30,6 @@ is not run again) and the table prints.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -43,6 +42,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+from benchmarks import reproduce  # noqa: E402
+from cnt_env.jsonl import append_row  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "flow_noise.jsonl"
 VBARS = (0.019, 0.037, 0.12)
@@ -74,7 +76,6 @@ def point_key(vbar: float, sigma: float, corr: float, seed: int, deposit: float)
 def run_point(vbar: float, sigma: float, corr: float, seed: int, deposit: float) -> dict[str, Any]:
     """Lay ``deposit`` L_vb at ``vbar`` under the fluctuating flow and measure it as
     ``reproduce.py`` measures its points (the preset's transient dropped)."""
-    from benchmarks import reproduce
     from cnt_env.patterns import MeasureOptions, measure
     from cnt_env.presets import RUN_TRANSIENT
     from cnt_env.sim.deposition import DepositionSim
@@ -110,9 +111,7 @@ def run_point(vbar: float, sigma: float, corr: float, seed: int, deposit: float)
 
 
 def _row(r: dict[str, Any]) -> str:
-    def f(x: Any, nd: int = 1) -> str:
-        return "-" if x is None else f"{x:.{nd}f}"
-
+    f = reproduce._fmt
     cells = [f"{r['vbar']:g}", f"{r['sigma']:g}", f"{r['corr']:g}", str(r["seed"]), r["pattern"],
              f(r["amplitude"]), f(r["wavelength_x"]), f(r["settled_amplitude_cv"], 3),
              f(r["settled_wavelength_cv"], 3), str(r["n_loops"]), f"{r['wall_s']:.0f}"]  # fmt: skip
@@ -125,25 +124,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sigma", type=float, nargs="*", default=list(SIGMAS))
     p.add_argument("--corr", type=float, default=CORR)
     p.add_argument("--seeds", default="0", help="comma separated noise seeds")
-    p.add_argument("--deposit", type=float, default=3000.0, help="L_vb per point (the table's)")
+    p.add_argument("--deposit", type=float, default=reproduce.SERPENTINE_RUN,
+                   help="L_vb per point (the table's)")  # fmt: skip
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--out", type=Path, default=OUT)
     a = p.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",")]
-    done: dict[str, dict[str, Any]] = {}
-    if a.out.is_file():
-        for line in a.out.read_text().splitlines():
-            if line.strip():
-                rec = json.loads(line)
-                done[rec["key"]] = rec
+    done = reproduce.load_done(a.out)
     todo = [(v, s, a.corr, sd, a.deposit) for v in a.vbar for s in a.sigma for sd in seeds
             if point_key(v, s, a.corr, sd, a.deposit) not in done]  # fmt: skip
     print(f"{len(todo)} points to run, {len(done)} in {a.out}", flush=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         for rec in pool.map(run_point, *zip(*todo, strict=True)) if todo else []:
-            with a.out.open("a") as fh:
-                fh.write(json.dumps(rec) + "\n")
+            append_row(a.out, rec)
             done[rec["key"]] = rec
             print(_row(rec), flush=True)
     print("| v̄ | sigma | corr | seed | class | Ā | λ̄_x | CV Ā | CV λ̄ | loops | wall s |")
