@@ -151,6 +151,33 @@ def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> No
         )
 
 
+def test_demo_short_run_selects_on_validation_with_the_recipes_rollouts() -> None:
+    """cnt-demo's short run keeps the recipe's rollouts and learning settings, evaluates
+    once per update, and chooses best_model.zip on validation routes only: never on a
+    held-out route that the demo then scores (it chose on ``u_turn`` before 2026-12-07)."""
+    from training.common import (
+        CHECKPOINT_CALLBACK,
+        CONFIG_DIR,
+        EVAL_CALLBACK,
+        VALIDATION,
+        held_out_names,
+        load_config,
+    )
+    from training.demo import DEMO_CONFIG, short_run_config
+
+    recipe = load_config(CONFIG_DIR / DEMO_CONFIG)
+    cfg = short_run_config(recipe)
+    assert {k: v for k, v in cfg.items() if k != "callback"} == {
+        k: v for k, v in recipe.items() if k != "callback"
+    }
+    (ev,) = [c[EVAL_CALLBACK] for c in cfg["callback"] if EVAL_CALLBACK in c]
+    assert ev["eval_targets"] == [VALIDATION]
+    assert not set(ev["eval_targets"]) & set(held_out_names({}))
+    assert ev["eval_freq"] == recipe["n_steps"] * recipe["n_envs"]
+    (ck,) = [c[CHECKPOINT_CALLBACK] for c in cfg["callback"] if CHECKPOINT_CALLBACK in c]
+    assert ck["save_freq"] == 2 * ev["eval_freq"]
+
+
 @pytest.mark.parametrize("module", ["training.train", "training.evaluate", "training.demo"])
 def test_a_file_given_as_the_output_directory_is_a_usage_error(
     module: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
