@@ -36,6 +36,7 @@ from policies.residual import (
 
 __all__ = [
     "CONFIG_DIR",
+    "DEFAULT_N_ENVS",
     "ENV_ID",
     "VALIDATION",
     "HeldOutCycle",
@@ -76,6 +77,8 @@ NON_ALGO_KEYS = frozenset({
 })  # fmt: skip
 #: Registered episode cap (TimeLimit) when a config gives none: the env's own.
 DEFAULT_MAX_EPISODE_STEPS = 400
+#: Parallel envs when a config gives no ``n_envs`` (one per core of the 2-core machine).
+DEFAULT_N_ENVS = 2
 #: The project's callbacks in a config's ``callback`` list (rl-zoo style: a name, or a
 #: one-key dict name -> kwargs).
 EVAL_CALLBACK = "training.callbacks.HeldOutEval"
@@ -125,7 +128,7 @@ def check_run_config(config: dict[str, Any]) -> None:
     integers, and an episode cap (``env_kwargs.max_episode_steps``) of at least 1."""
     env_settings(config)  # the episode cap
     _positive_int_setting("n_timesteps", config.get("n_timesteps"))
-    _positive_int_setting("n_envs", config.get("n_envs", 2))
+    _positive_int_setting("n_envs", config.get("n_envs", DEFAULT_N_ENVS))
 
 
 def _positive_int_setting(key: str, value: Any) -> int:

@@ -16,7 +16,7 @@
 3. A rerun recording per policy and target (first seed) in ``<out>/rrd`` when rerun is
    installed (``pip install -e ".[rerun]"``), else a message.
 
-The short run is for show: with a 2-minute budget (~2.5k samples, ~4 PPO updates) it is
+The short run is for show: with a 2-minute budget (2.3-3.1k samples, 4-6 PPO updates) it is
 still about the follower it starts from (0.975 and 0.961 for training seeds 0 and 1
 against the follower's 0.966 on the default routes, 2026-12-07), far from the pretrained
 residual agent, whose training (``cnt-train``, configs in ``training/configs``) took an
@@ -35,6 +35,7 @@ from typing import Any
 from .common import (
     CHECKPOINT_CALLBACK,
     CONFIG_DIR,
+    DEFAULT_N_ENVS,
     EVAL_CALLBACK,
     EVAL_CONFIG,
     VALIDATION,
@@ -68,13 +69,12 @@ SHORT_RUN = "ppo_residual_short"
 
 
 def short_run_config(config: dict[str, Any]) -> dict[str, Any]:
-    """The short run's config: the recipe ``config`` with its own rollouts (n_steps 256 x
-    2 envs: an update per 512 samples, ~4 in 2 minutes at ~20 samples/s) and its
+    """The short run's config: the recipe ``config`` with its own rollouts and its
     callbacks replaced by one validation route after each update and a checkpoint every
     other, so best_model.zip is never chosen on a held-out route that step 2 evaluates.
     Rollouts of 64 (the setting before 2026-12-07) gave ~14 smaller updates, which in one
     of two runs took the agent into PPO's early dip (0.889 against the follower's 0.966)."""
-    per_update = int(config["n_steps"]) * int(config.get("n_envs", 2))
+    per_update = int(config["n_steps"]) * int(config.get("n_envs", DEFAULT_N_ENVS))
     return dict(config, callback=[
         {EVAL_CALLBACK: {"eval_targets": [VALIDATION], "eval_freq": per_update,
                          "n_eval_episodes": 1}},

@@ -68,6 +68,7 @@ from policies.sb3 import (
 from .callbacks import make_curriculum, make_task_metrics
 from .common import (
     CONFIG_DIR,
+    DEFAULT_N_ENVS,
     ENV_ID,
     DefaultsHelp,
     HeldOutCycle,
@@ -186,7 +187,7 @@ def train(
     stages = curriculum_settings(config)
     earlier = (None if trained_agent is None
                else check_trained_agent(trained_agent, algo, config, new_base_options))  # fmt: skip
-    n_envs = int(config.get("n_envs", 2))
+    n_envs = int(config.get("n_envs", DEFAULT_N_ENVS))
     vec_env = vec_env or config.get("vec_env", "subproc")
     run = Path(out)
     run.mkdir(parents=True, exist_ok=True)
