@@ -154,7 +154,8 @@ def test_evaluate_takes_a_model_by_path_under_its_own_name(tmp_path: Path) -> No
 def test_demo_short_run_selects_on_validation_with_the_recipes_rollouts() -> None:
     """cnt-demo's short run keeps the recipe's rollouts and learning settings, evaluates
     once per update, and chooses best_model.zip on validation routes only: never on a
-    held-out route that the demo then scores (it chose on ``u_turn`` before 2026-12-07)."""
+    held-out route that the demo then scores (it chose on ``u_turn`` before 2026-12-07).
+    Its length is a number of samples, so that one machine gives one model."""
     from training.common import (
         CHECKPOINT_CALLBACK,
         CONFIG_DIR,
@@ -163,12 +164,13 @@ def test_demo_short_run_selects_on_validation_with_the_recipes_rollouts() -> Non
         held_out_names,
         load_config,
     )
-    from training.demo import DEMO_CONFIG, short_run_config
+    from training.demo import DEMO_CONFIG, SHORT_RUN_STEPS, short_run_config
 
     recipe = load_config(CONFIG_DIR / DEMO_CONFIG)
     cfg = short_run_config(recipe)
-    assert {k: v for k, v in cfg.items() if k != "callback"} == {
-        k: v for k, v in recipe.items() if k != "callback"
+    own = ("callback", "n_timesteps")
+    assert {k: v for k, v in cfg.items() if k not in own} == {
+        k: v for k, v in recipe.items() if k not in own
     }
     (ev,) = [c[EVAL_CALLBACK] for c in cfg["callback"] if EVAL_CALLBACK in c]
     assert ev["eval_targets"] == [VALIDATION]
@@ -176,6 +178,10 @@ def test_demo_short_run_selects_on_validation_with_the_recipes_rollouts() -> Non
     assert ev["eval_freq"] == recipe["n_steps"] * recipe["n_envs"]
     (ck,) = [c[CHECKPOINT_CALLBACK] for c in cfg["callback"] if CHECKPOINT_CALLBACK in c]
     assert ck["save_freq"] == 2 * ev["eval_freq"]
+    # a sample budget of whole updates (not wall time), so a machine gives one model
+    assert cfg["n_timesteps"] == SHORT_RUN_STEPS
+    assert SHORT_RUN_STEPS % ev["eval_freq"] == 0 and SHORT_RUN_STEPS // ev["eval_freq"] >= 4
+    assert short_run_config(recipe, 1024)["n_timesteps"] == 1024
 
 
 @pytest.mark.parametrize("module", ["training.train", "training.evaluate", "training.demo"])

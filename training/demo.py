@@ -1,12 +1,15 @@
 """End-to-end demo (``cnt-demo``; the main job of ``make demo``), within a time budget.
 
-    cnt-demo [--budget-minutes 8] [--targets u_turn,l_up] [--seeds 0,1,2]
-             [--out runs/demo] [--no-train] [--no-rrd]
+    cnt-demo [--budget-minutes 8] [--train-steps 2560] [--targets u_turn,l_up]
+             [--seeds 0,1,2] [--out runs/demo] [--no-train] [--no-rrd]
 
 1. A short residual PPO training run (the shipped kind of agent, a residual on the route
-   follower; about a quarter of the budget, stopped by wall time; its model,
-   VecNormalize stats, checkpoints, learning curve and tensorboard logs land in
-   ``<out>/runs/ppo_s0``), to show the pipeline working end to end.
+   follower; a fixed number of samples, ``--train-steps``, 5 PPO updates by default,
+   so that the same machine gives the same model every time; its model, VecNormalize
+   stats, checkpoints, learning curve and tensorboard logs land in
+   ``<out>/runs/ppo_s0``), to show the pipeline working end to end. Half of
+   ``--budget-minutes`` caps its wall time on a slow machine; a run the cap cut short
+   says so, and its model then depends on the machine's speed.
 2. Evaluation of random, constant (the committed grid-search choice,
    ``training/results/constant_best.json``), the scripted route follower, the
    pretrained residual PPO (``policies/pretrained``, trained on the fast surrogate) and
@@ -16,12 +19,11 @@
 3. A rerun recording per policy and target (first seed) in ``<out>/rrd`` when rerun is
    installed (``pip install -e ".[rerun]"``), else a message.
 
-The short run is for show: with a 2-minute budget (2.3-3.1k samples, 4-6 PPO updates) it is
-still about the follower it starts from (0.975 and 0.961 for training seeds 0 and 1
-against the follower's 0.966 on the default routes, 2026-12-07), far from the pretrained
-residual agent, whose training (``cnt-train``, configs in ``training/configs``) took an
-hour (training/README.md). Its ``best_model.zip`` is chosen on a validation route (a
-fixed draw from the training families), never on the held-out routes of step 2.
+The short run is for show: 2 560 samples (5 PPO updates, ~2 minutes) leave it about the
+follower it starts from, far from the pretrained residual agent, whose training
+(``cnt-train``, configs in ``training/configs``) took an hour (training/README.md). Its
+``best_model.zip`` is chosen on a validation route (a fixed draw from the training
+families), never on the held-out routes of step 2.
 """
 
 from __future__ import annotations
@@ -62,20 +64,25 @@ RESULTS = Path(__file__).resolve().parent / "results"
 DEMO_CONFIG = "ppo_residual.yml"
 #: Pretrained models the demo evaluates (the best one; cnt-evaluate runs them all).
 DEMO_MODELS = ("ppo_residual",)
-#: Share of the budget given to the short training run.
-TRAIN_SHARE = 0.25
+#: Samples of the short training run: 5 updates of the recipe's rollouts (256 x 2 envs).
+#: A sample budget, not a wall-time one, makes the demo's model the same on every run of
+#: one machine (training is deterministic: tests/test_training.py).
+SHORT_RUN_STEPS = 2560
+#: Share of the budget that caps the short run's wall time (a guard for slow machines).
+TRAIN_CAP_SHARE = 0.5
 #: The name of the short run's model in the evaluation table.
 SHORT_RUN = "ppo_residual_short"
 
 
-def short_run_config(config: dict[str, Any]) -> dict[str, Any]:
-    """The short run's config: the recipe ``config`` with its own rollouts and its
-    callbacks replaced by one validation route after each update and a checkpoint every
-    other, so best_model.zip is never chosen on a held-out route that step 2 evaluates.
+def short_run_config(config: dict[str, Any], steps: int = SHORT_RUN_STEPS) -> dict[str, Any]:
+    """The short run's config: the recipe ``config`` for ``steps`` samples, with its own
+    rollouts, and its callbacks replaced by one validation route after each update and a
+    checkpoint every other, so best_model.zip is never chosen on a held-out route that
+    step 2 evaluates.
     Rollouts of 64 (the setting before 2026-12-07) gave ~14 smaller updates, which in one
     of two runs took the agent into PPO's early dip (0.889 against the follower's 0.966)."""
     per_update = int(config["n_steps"]) * int(config.get("n_envs", DEFAULT_N_ENVS))
-    return dict(config, callback=[
+    return dict(config, n_timesteps=int(steps), callback=[
         {EVAL_CALLBACK: {"eval_targets": [VALIDATION], "eval_freq": per_update,
                          "n_eval_episodes": 1}},
         {CHECKPOINT_CALLBACK: {"save_freq": 2 * per_update}},
@@ -86,7 +93,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="cnt-demo", description=__doc__.split("\n\n")[0],
                                 formatter_class=DefaultsHelp)  # fmt: skip
     p.add_argument("--budget-minutes", type=positive_float, default=8.0,
-                   help="wall-time budget; the short training run gets a quarter")  # fmt: skip
+                   help="wall-time budget; half of it caps the short training run")  # fmt: skip
+    p.add_argument("--train-steps", type=positive_int, default=SHORT_RUN_STEPS,
+                   help="samples of the short training run")  # fmt: skip
     p.add_argument("--targets", default="u_turn,l_up", help="held-out routes, comma separated")
     p.add_argument("--seeds", type=seed_list, default="0,1,2",
                    help="episode seeds, comma separated")  # fmt: skip
@@ -106,11 +115,18 @@ def main(argv: list[str] | None = None) -> int:
     config = load_config(CONFIG_DIR / DEMO_CONFIG)
     runs = []
     if not args.no_train:
-        train_s = TRAIN_SHARE * budget
-        cfg = short_run_config(config)
-        print(f"[demo] 1/3 short residual PPO run, {train_s:.0f} s of wall time")
-        train("ppo", cfg, args.out / "runs" / "ppo_s0", seed=0, max_wall_seconds=train_s)
-        runs.append(args.out / "runs" / "ppo_s0")
+        cap_s = TRAIN_CAP_SHARE * budget
+        cfg = short_run_config(config, args.train_steps)
+        print(f"[demo] 1/3 short residual PPO run, {args.train_steps} samples "
+              f"(at most {cap_s:.0f} s of wall time)")  # fmt: skip
+        run = args.out / "runs" / "ppo_s0"
+        train("ppo", cfg, run, seed=0, max_wall_seconds=cap_s)
+        done = load_config(run / "config.yml", "run")["timesteps_done"]
+        if done < args.train_steps:
+            print(f"[demo] the wall-time cap stopped the short run at {done} of "
+                  f"{args.train_steps} samples: its model depends on this machine's speed; "
+                  "raise --budget-minutes for the full run")  # fmt: skip
+        runs.append(run)
     policies = ["random", "constant", "scripted"]
     policies += [p for p in DEMO_MODELS if (PRETRAINED / f"{p}.zip").is_file()]
     # the short run's final model is evaluated too, beside the pretrained one
