@@ -841,6 +841,8 @@ def test_route_task_spaces_and_reward_terms(rkw: dict) -> None:
         [[0.0, 0.0], [40.0, 0.0]],
         {"waypoints": [[5, 5], [5, 45]], "width": 9.0, "pads": [[[0, 25], [10, 25]]],
          "keepouts": [{"rect": [20, 5, 30, 40]}], "name": "mine"},
+        {"waypoints": [[5, 5], [5, 45]], "width": 9.0, "pads": [[[0, 25], [10, 25]]],
+         "pad_width": 4.0, "name": "mine"},
         "u_turn",
         "staircase",
     ],
@@ -854,11 +856,16 @@ def test_route_targets_in_every_form(rkw: dict, target) -> None:
     assert isinstance(r, routes.Route) and np.array_equal(r.waypoints[0], [0.0, 0.0])
     if isinstance(target, dict):
         assert r.name == "mine" and r.width == 9.0 and len(r.pads) == 1
-        assert np.allclose(r.keepouts[0].min(axis=0), [15.0, 0.0])  # moved with the route
+        assert len(r.keepouts) == len(target.get("keepouts", ()))
+        if r.keepouts:
+            assert np.allclose(r.keepouts[0].min(axis=0), [15.0, 0.0])  # moved with the route
         assert info["n_pads"] == 1
+        # the score counts the pads as strips of the route's pad_width
+        assert r.pad_width == target.get("pad_width", 0.0) == 2.0 * env._score.pad_half
     assert env.max_episode_steps == env.episode_steps_for(r) > 10
     same = routes.resolve(r.to_dict(), np.random.default_rng(0))
     assert np.array_equal(same.waypoints, r.waypoints) and same.width == r.width
+    assert same.pad_width == r.pad_width
 
 
 @pytest.mark.parametrize("bad", [[[0, 0], [1e-300, 0]], [[0, 0], [0.5, 0]], "nowhere",

@@ -160,6 +160,14 @@ def test_draw_route_alone() -> None:
     assert LABELS["target_done"] in labels and LABELS["pad"] in labels
     assert len(ax.collections) == 1  # the corridor band
     fig.canvas.draw()
+    # with a pad width, the electrode's rectangle (4 x 3 along the pad) under its line
+    fig, ax = agg_axes()
+    plotting.draw_route(ax, target, corridor=3.0, pad_width=3.0,
+                        pads=[np.array([[20.0, 10.0], [24.0, 10.0]])])  # fmt: skip
+    (xy,) = [p.get_xy() for p in ax.patches if len(p.get_xy())]  # (fill([]) is empty)
+    assert np.allclose([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()],
+                       [20.0, 24.0, 8.5, 11.5])  # fmt: skip
+    fig.canvas.draw()
 
 
 def test_renderer_blits_the_same_picture_as_a_full_draw() -> None:

@@ -128,3 +128,83 @@ def test_route_outside_pads_and_shorts() -> None:
 
     r = Route(line, 4.0, pads, keep)
     assert score_route_trace(zig, r)["score"] == pytest.approx(t.sum())
+
+
+# ---- pads as electrode strips (Route.pad_width) --------------------------------------------
+
+PAD_ALONG_Z = np.array([[[20.0, -10.0], [20.0, 10.0]]])  # across a run along x
+
+
+@pytest.mark.parametrize(
+    ("offset", "pad_width", "touched"),
+    [
+        (1.5, 0.0, False),  # a line is met only by a crossing
+        (1.5, 2.9, False),  # the strip reaches 1.45 < 1.5
+        (1.5, 3.1, True),  # 1.55 >= 1.5
+        (-1.5, 3.1, True),  # either side
+        (0.0, 0.0, False),  # collinear with the pad: touching, not crossing
+        (0.0, 1e-9, True),
+    ],
+)
+def test_a_run_along_a_pad_touches_it_within_half_its_width(
+    offset: float, pad_width: float, touched: bool
+) -> None:
+    """The serpentine's arm running along an electrode: a segment parallel to the pad,
+    ``offset`` from its centre line, touches a strip of ``pad_width`` exactly when
+    |offset| <= pad_width / 2 (the strip's edge)."""
+    from cnt_env.task.scoring import RouteScore
+
+    x = 20.0 + offset
+    arm = np.array([[0.0, 0.0], [x, -30.0], [x, 30.0]])  # enters beyond the pad's end
+    score = RouteScore(LINE * 4.0, 40.0, PAD_ALONG_Z, (), pad_width=pad_width)
+    assert score.update(arm, len(arm))["pads_crossed"] == int(touched)
+
+
+@pytest.mark.parametrize(
+    ("end", "touched"),
+    [
+        ((20.0, 10.0), True),  # the electrode's corner line
+        ((20.0, 10.01), False),  # just beyond its flat end, on its centre line
+        ((21.9, 9.9), True),  # inside, beside the end
+        ((22.1, 9.9), False),  # beyond the strip's edge (half-width 2)
+        ((18.0, 11.0), False),  # past a corner: within 2 of the segment's end, outside
+    ],
+)  # fmt: skip
+def test_a_strip_is_a_rectangle_with_flat_ends(end: tuple, touched: bool) -> None:
+    """The strip of a pad 4 wide is the rectangle x in [18, 22], z in [-10, 10]: a trace
+    ending at ``end`` (coming from beyond the pad's end, away from it) touches it exactly
+    when ``end`` lies in that rectangle, boundary included."""
+    from cnt_env.task.scoring import RouteScore
+
+    tip = np.array([[0.0, 0.0], [40.0, 30.0], list(end)])
+    score = RouteScore(LINE * 4.0, 40.0, PAD_ALONG_Z, (), pad_width=4.0)
+    assert score.update(tip, len(tip))["pads_crossed"] == int(touched)
+
+
+def test_a_crossing_meets_a_pad_of_any_width_and_width_zero_is_the_line() -> None:
+    """A trace crossing the pad meets it at every width; with pad_width 0 the score is
+    the crossing score bit for bit (a random zigzag with three pads)."""
+    from cnt_env.task.scoring import RouteScore
+
+    cross = np.array([[0.0, 0.0], [40.0, 0.0]])
+    for w in (0.0, 0.5, 8.0):
+        m = RouteScore(LINE * 4.0, 40.0, PAD_ALONG_Z, (), pad_width=w).update(cross, 2)
+        assert m["pads_crossed"] == 1
+    rng = np.random.default_rng(2)
+    trace = _along(U, 0.7) + rng.normal(0.0, 6.0, _along(U, 0.7).shape)
+    pads = np.array([[[20.0, -8.0], [20.0, 8.0]], [[52.0, 20.0], [68.0, 20.0]]])
+    a = RouteScore(U, 6.0, pads, ()).update(trace, len(trace))
+    b = RouteScore(U, 6.0, pads, (), pad_width=0.0).update(trace, len(trace))
+    assert a == b
+
+
+def test_a_wider_strip_never_loses_a_pad() -> None:
+    """Monotone in the width: every pad touched at width p is touched at any p' > p."""
+    from cnt_env.task.scoring import RouteScore
+
+    rng = np.random.default_rng(3)
+    pads = rng.uniform(-30.0, 90.0, (12, 2, 2))
+    trace = np.cumsum(rng.normal(0.5, 3.0, (80, 2)), axis=0)
+    counts = [RouteScore(U, 60.0, pads, (), pad_width=w).update(trace, len(trace))
+              ["pads_crossed"] for w in (0.0, 1.0, 3.0, 10.0, 40.0)]  # fmt: skip
+    assert counts == sorted(counts) and counts[0] < counts[-1] == len(pads)

@@ -308,6 +308,25 @@ def test_a_route_beside_its_keepouts_and_pads_at_the_corridor_edge_is_accepted()
                 routes.draw(fam, rng, d)
 
 
+def test_pad_width_round_trips_reaches_and_refuses_bad_values() -> None:
+    """``pad_width`` (an electrode strip's width): read from and written to the dict
+    format (only when > 0, so files of line pads stay as they are), reaching half of it
+    further than a line pad, and refused when negative or not finite."""
+    from cnt_env.task import routes
+
+    spec = {"waypoints": [[0, 0], [80, 0]], "pads": [[[40, 21], [40, 30]]]}
+    with pytest.raises(ValueError, match="pad 0"):  # 21 from the route, w 18.5
+        routes.from_dict(spec)
+    r = routes.from_dict({**spec, "pad_width": 6.0})  # the strip's edge at 18
+    assert r.pad_width == 6.0 and r.to_dict()["pad_width"] == 6.0
+    again = routes.from_dict(r.to_dict())
+    assert again.pad_width == 6.0 and np.array_equal(again.pads, r.pads)
+    assert "pad_width" not in routes.from_dict({"waypoints": [[0, 0], [80, 0]]}).to_dict()
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="pad_width"):
+            routes.from_dict({**spec, "pad_width": bad})
+
+
 def test_a_closed_keepout_ring_is_the_open_polygon_and_edges_are_touching() -> None:
     """GeoJSON writes a polygon's ring closed (the first vertex again at the end): the
     route keeps the polygon with its zero-length edges dropped, so the follower's plan

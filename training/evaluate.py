@@ -414,7 +414,7 @@ def plot_traces(results: Sequence[dict[str, Any]], targets: Sequence[str], out: 
         route = (route_of or {}).get(t)
         if route is not None:
             draw_route(ax, r0["target_points"], corridor=route.width, pads=route.pads,
-                       keepouts=route.keepouts)  # fmt: skip
+                       keepouts=route.keepouts, pad_width=route.pad_width)  # fmt: skip
         else:
             draw_route(ax, r0["target_points"], corridor=r0.get("corridor"))
         for p in policies:

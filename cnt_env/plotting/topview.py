@@ -242,9 +242,11 @@ def draw_route(
     pads: Sequence[Any] = (),
     keepouts: Sequence[Any] = (),
     line_width: float = 1.6,
+    pad_width: float = 0.0,
 ) -> None:
     """Draw a target route on ``ax``: the corridor of half-width ``corridor`` (a light
-    band), keep-out polygons, pads ((2, 2) segments), the route ((T, 2) as (x, z)) and
+    band), keep-out polygons, pads ((2, 2) segments; with ``pad_width`` > 0 also the
+    rectangles the score counts as the electrodes), the route ((T, 2) as (x, z)) and
     its covered part ``target_done``; colours from :data:`PALETTE`, labelled for a
     legend. The static part of :func:`draw_top_view`, for figures that draw their own
     traces over it (e.g. several policies on one route)."""
@@ -269,6 +271,11 @@ def draw_route(
         )
     for i, pad in enumerate(pads):
         xz = _xz(pad)
+        if pad_width > 0 and len(xz) == 2:  # the electrode: a rectangle along the pad
+            d = xz[1] - xz[0]
+            off = 0.5 * float(pad_width) * np.array([-d[1], d[0]]) / float(np.hypot(*d))
+            rect = np.array([xz[0] + off, xz[1] + off, xz[1] - off, xz[0] - off])
+            ax.fill(rect[:, 0], rect[:, 1], color=rgb01("pad"), alpha=0.3, lw=0, zorder=0.65)
         _line(ax, "pad", xz, lw=3 * lw, zorder=0.7, label=i == 0)
     if len(target_xz):
         _line(ax, "target", target_xz, lw=1.3 * lw, zorder=1)

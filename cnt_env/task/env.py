@@ -32,9 +32,9 @@ from cnt_env.task.routes import DEFAULT_HALF_WIDTH, Route
 from cnt_env.task.scoring import (
     COVERAGE_SPACING,
     ROUTE_TERMS,
-    RouteScore,
     ThinScore,
     pattern_measures,
+    route_score,
 )
 from cnt_env.task.spaces import (
     LAID_RATIO_BOUND,
@@ -157,7 +157,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     and ``reward == sum(info["reward_*"])``; ``info["score"]`` is Φ.
 
     Routes (:class:`~cnt_env.task.scoring.RouteScore`): G = furthest arc length reached by
-    trace inside the corridor / route length; P = pads crossed / pads; C = 1 once G = 1;
+    trace inside the corridor / route length; P = pads met / pads (crossed, or entered as
+    rectangles with the route's ``pad_width`` > 0); C = 1 once G = 1;
     o = fraction of the episode's trace nodes outside the corridor; n_s = nodes in
     keep-outs. A = (0.8 G + 0.2 P + 0.2 C) / (0.8 + 0.2 [pads] + 0.2),
     Φ = A (1 - o)(1 - min(1, 0.05 n_s)) ∈ [0, 1]; terms ``progress``, ``pads``,
@@ -189,7 +190,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     target is placed at the contact point: drawn from ``families`` at ``difficulty`` with
     ``np_random`` (or, with ``route_file``, one of that file's routes, uniformly), or
     ``reset(options={"target": ...})``: a family or held-out name, a
-    Route, a dict ``{"waypoints", "width", "pads", "keepouts", "name"}``, or an (n, 2)
+    Route, a dict ``{"waypoints", "width", "pads", "pad_width", "keepouts", "name"}``, or an (n, 2)
     polyline (corridor ``route_width``). A bad target (say zero length) raises
     ``ValueError`` before anything changes.
 
@@ -570,7 +571,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         if isinstance(target, Route):
             _, pads, keepouts = target.translated(self._origin)
             self._pads_abs, self._keepouts_abs = pads, keepouts
-            self._score = RouteScore(target.waypoints, target.width, target.pads, target.keepouts)
+            self._score = route_score(target)
             self.max_episode_steps = self.episode_steps_for(target)
         else:
             self._pads_abs, self._keepouts_abs = np.zeros((0, 2, 2)), ()

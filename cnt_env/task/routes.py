@@ -3,8 +3,9 @@
 A :class:`Route` is how a CNT interconnect is specified and what the flow can draw: a
 polyline of waypoints in the substrate plane (x, z) in L_vb, starting at the origin (the
 env places it at the contact point at reset), a corridor of half-width ``width`` around
-it, optional ``pads`` (segments the trace must cross, like electrodes) and optional
-``keepouts`` (polygons the trace must not enter, like a neighbouring wire).
+it, optional ``pads`` (segments the trace must cross, like electrodes; with a
+``pad_width`` > 0, strips of that width the trace must touch) and optional ``keepouts``
+(polygons the trace must not enter, like a neighbouring wire).
 
 The corridor's default half-width, :data:`DEFAULT_HALF_WIDTH`, comes from the measured
 band widths (``benchmarks/results/step_response_surrogate.json``): a constant flow across the steps
@@ -40,9 +41,9 @@ family          shape
 * a family name (drawn) or a held-out name;
 * an ``(n, 2)`` polyline: the default corridor, no pads or keep-outs, named ``"custom"``;
 * a dict ``{"waypoints": [[x, z], ...], "width": w, "pads": [[[x0, z0], [x1, z1]], ...],
-  "keepouts": [[[x, z], ...] | {"rect": [x0, z0, x1, z1]}, ...], "name": str}``; only
-  ``waypoints`` is required. Everything is translated with the waypoints so that the route
-  starts at the origin.
+  "pad_width": p, "keepouts": [[[x, z], ...] | {"rect": [x0, z0, x1, z1]}, ...],
+  "name": str}``; only ``waypoints`` is required. Everything is translated with the
+  waypoints so that the route starts at the origin.
 
 A route whose parts contradict one another is refused (``ValueError``): a waypoint inside
 a keep-out or a leg crossing one (the route itself would be a short, and the contact
@@ -133,7 +134,14 @@ class Route:
 
     ``waypoints`` (n, 2) from the origin; ``width`` the corridor half-width w (L_vb);
     ``pads`` (p, 2, 2) segments; ``keepouts`` a tuple of (k, 2) polygons (k >= 3);
-    ``params`` what it was built from (JSON-friendly)."""
+    ``params`` what it was built from (JSON-friendly).
+
+    ``pad_width`` (L_vb, default 0): the width of each pad as an electrode, a rectangle
+    along its segment. 0 is a line, met when the trace crosses it; p > 0 a strip, met
+    when the trace enters it (within p / 2 across the segment, between its ends), so a
+    run lying along the electrode contacts it as a crossing does. An electrode is
+    0.5-several µm wide, 4-30 L_vb on the paper's stepped substrate (L_vb = 0.128 µm),
+    as wide as the serpentine's wavelength or wider (docs/task.md, "Pads")."""
 
     waypoints: FloatArray
     width: float = DEFAULT_HALF_WIDTH
@@ -141,6 +149,7 @@ class Route:
     keepouts: tuple[FloatArray, ...] = ()
     name: str = "custom"
     params: Mapping[str, Any] = field(default_factory=dict)
+    pad_width: float = 0.0
 
     def __post_init__(self) -> None:
         pts = targets_mod.validated_polyline(self.waypoints)
@@ -157,6 +166,9 @@ class Route:
             raise ValueError("pads must be finite segments [[x0, z0], [x1, z1]]")
         if np.any(np.hypot(*(pads[:, 1] - pads[:, 0]).T) <= 0):
             raise ValueError("a pad segment must have non-zero length")
+        pw = float(self.pad_width)
+        if not (math.isfinite(pw) and pw >= 0.0):
+            raise ValueError(f"pad_width (L_vb) must be finite and >= 0, got {self.pad_width!r}")
         keepouts = []
         for k in self.keepouts:
             poly = np.array(k, dtype=np.float64)
@@ -173,12 +185,13 @@ class Route:
                                  f"{poly.shape[0]}")  # fmt: skip
             poly.setflags(write=False)
             keepouts.append(poly)
-        _check_consistent(pts, w, pads, keepouts)
+        _check_consistent(pts, w, pads, keepouts, pw)
         for arr in (pts, pads):
             arr.setflags(write=False)
         object.__setattr__(self, "waypoints", pts)
         object.__setattr__(self, "width", w)
         object.__setattr__(self, "pads", pads)
+        object.__setattr__(self, "pad_width", pw)
         object.__setattr__(self, "keepouts", tuple(keepouts))
         object.__setattr__(self, "params", dict(self.params))
 
@@ -198,18 +211,21 @@ class Route:
         return self.waypoints + o, self.pads + o, tuple(k + o for k in self.keepouts)
 
     def to_dict(self) -> dict[str, Any]:
-        """The dict format of :func:`resolve` (JSON-friendly)."""
-        return {
+        """The dict format of :func:`resolve` (JSON-friendly; ``pad_width`` only when > 0)."""
+        out = {
             "name": self.name,
             "waypoints": self.waypoints.tolist(),
             "width": self.width,
             "pads": self.pads.tolist(),
             "keepouts": [k.tolist() for k in self.keepouts],
         }
+        if self.pad_width > 0.0:
+            out["pad_width"] = self.pad_width
+        return out
 
 
 def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
-                      keepouts: list[FloatArray]) -> None:  # fmt: skip
+                      keepouts: list[FloatArray], pad_width: float = 0.0) -> None:  # fmt: skip
     """Refuse a route whose parts contradict one another (module doc)."""
     legs = list(itertools.pairwise(pts))
     fix = "route the waypoints around the keep-out"
@@ -226,7 +242,7 @@ def _check_consistent(pts: FloatArray, width: float, pads: FloatArray,
                 raise ValueError(f"leg {i} of the route ({a.tolist()} -> {b.tolist()}) "
                                  f"crosses keep-out {k}: {fix}")  # fmt: skip
     for j, (c, d) in enumerate(pads):
-        gap = min(segment_distance(a, b, c, d) for a, b in legs)
+        gap = min(segment_distance(a, b, c, d) for a, b in legs) - 0.5 * pad_width
         if gap > width:
             raise ValueError(f"pad {j} {[c.tolist(), d.tolist()]} is {gap:.3g} L_vb from the "
                              f"route, outside its corridor (half-width {width:.3g}): move the "
@@ -488,10 +504,11 @@ def held_out(name: str) -> Route:
 
 def from_dict(spec: Mapping[str, Any]) -> Route:
     """A Route from the dict format (module doc), translated to start at the origin."""
-    unknown = set(spec) - {"waypoints", "width", "pads", "keepouts", "name", "params"}
+    known = {"waypoints", "width", "pads", "pad_width", "keepouts", "name", "params"}
+    unknown = set(spec) - known
     if unknown:
         raise ValueError(f"unknown route keys {sorted(unknown)}; known: waypoints, width, "
-                         "pads, keepouts, name")  # fmt: skip
+                         "pads, pad_width, keepouts, name")  # fmt: skip
     if "waypoints" not in spec:
         raise ValueError("a route dict needs 'waypoints': [[x, z], ...]")
     pts = targets_mod.validated_polyline(spec["waypoints"])
@@ -506,7 +523,7 @@ def from_dict(spec: Mapping[str, Any]) -> Route:
     pads = np.asarray(spec.get("pads") or np.zeros((0, 2, 2)), dtype=float).reshape(-1, 2, 2)
     return Route(pts - o, float(spec.get("width", DEFAULT_HALF_WIDTH)), pads - o,
                  tuple(keepouts), str(spec.get("name", "custom")),
-                 dict(spec.get("params") or {}))  # fmt: skip
+                 dict(spec.get("params") or {}), float(spec.get("pad_width", 0.0)))  # fmt: skip
 
 
 #: Largest route file read (bytes): a route is a few hundred bytes.

@@ -23,6 +23,7 @@ the solve (they may slide on the stepped substrate) are re-measured every call.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -44,6 +45,7 @@ __all__ = [
     "covered",
     "distances",
     "pattern_measures",
+    "route_score",
     "score_route_trace",
     "score_trace",
 ]
@@ -220,8 +222,33 @@ def _walk(points, verts, cum_s, width, jump, furthest):  # pragma: no cover - nu
 
 
 @njit(cache=True)
-def _mark_crossed(points, pads, hit):  # pragma: no cover - numba
-    """Set ``hit[k]`` where the polyline ``points`` crosses pad segment k (pads (p, 2, 2))."""
+def _touches_strip(cx, cz, dx, dz, ax, az, bx, bz, half):  # pragma: no cover - numba
+    """Whether segment c-d meets the rectangle of half-width ``half`` along segment a-b
+    (an electrode strip, boundary included): Liang-Barsky clipping of c-d in the strip's
+    frame, u along a-b in [0, |ab|] and v across it in [-half, half]."""
+    ex, ez = bx - ax, bz - az
+    length = math.sqrt(ex * ex + ez * ez)
+    ex, ez = ex / length, ez / length
+    uc = (cx - ax) * ex + (cz - az) * ez
+    vc = (cz - az) * ex - (cx - ax) * ez
+    du = (dx - cx) * ex + (dz - cz) * ez
+    dv = (dz - cz) * ex - (dx - cx) * ez
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-du, uc), (du, length - uc), (-dv, vc + half), (dv, half - vc)):
+        if p == 0.0:
+            if q < 0.0:
+                return False
+        elif p < 0.0:
+            t0 = max(t0, q / p)
+        else:
+            t1 = min(t1, q / p)
+    return t0 <= t1
+
+
+@njit(cache=True)
+def _mark_crossed(points, pads, hit, half):  # pragma: no cover - numba
+    """Set ``hit[k]`` where the polyline ``points`` crosses pad segment k (pads (p, 2, 2)),
+    or, with ``half`` > 0 (half the route's pad_width), enters its strip."""
     for k in range(pads.shape[0]):
         if hit[k]:
             continue
@@ -230,6 +257,11 @@ def _mark_crossed(points, pads, hit):  # pragma: no cover - numba
         for i in range(points.shape[0] - 1):
             cx, cz = points[i, 0], points[i, 1]
             dx, dz = points[i + 1, 0], points[i + 1, 1]
+            if half > 0.0:
+                if _touches_strip(cx, cz, dx, dz, ax, az, bx, bz, half):
+                    hit[k] = True
+                    break
+                continue
             d1 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax)
             d2 = (bx - ax) * (dz - az) - (bz - az) * (dx - ax)
             d3 = (dx - cx) * (az - cz) - (dz - cz) * (ax - cx)
@@ -244,8 +276,10 @@ class RouteScore:
     trace grows (the same ``update(trace, n_frozen)`` as :class:`ThinScore`).
 
     With G the progress (furthest arc length reached by trace inside the corridor, over
-    the route length), P the fraction of pads crossed, C = 1 once G = 1, o the fraction of
-    trace nodes outside the corridor and n_s the nodes inside keep-outs:
+    the route length), P the fraction of pads crossed (or, with ``pad_width`` > 0,
+    touched: a trace segment entering the strip of that width along the pad), C = 1 once
+    G = 1, o the fraction of trace nodes outside the corridor and n_s the nodes inside
+    keep-outs:
 
         A = (w_g G + w_p P + w_c C) / (w_g + w_p [pads] + w_c),
         k = min(1, SHORT_PENALTY n_s) (0.05 per node),
@@ -255,14 +289,15 @@ class RouteScore:
     outside -A o and short -A (1 - o) k, which sum to Φ."""
 
     def __init__(self, waypoints: np.ndarray, width: float, pads: np.ndarray,
-                 keepouts: Sequence[np.ndarray],
-                 weights: Sequence[float] = ROUTE_WEIGHTS) -> None:  # fmt: skip
+                 keepouts: Sequence[np.ndarray], weights: Sequence[float] = ROUTE_WEIGHTS,
+                 pad_width: float = 0.0) -> None:  # fmt: skip
         self.waypoints = np.ascontiguousarray(waypoints, dtype=np.float64)
         self.width = float(width)
         self.cum_s = targets_mod.cumulative_length(self.waypoints)
         self.length = float(self.cum_s[-1])
         self.jump = PROGRESS_JUMP_WIDTHS * self.width
         self.pads = np.ascontiguousarray(np.reshape(pads, (-1, 2, 2)), dtype=np.float64)
+        self.pad_half = 0.5 * float(pad_width)
         self.keep_vertices, self.keep_starts = geometry.pack(tuple(keepouts))
         wg, wp, wc = (float(x) for x in weights)
         self.weights = np.array([wg, wp if len(self.pads) else 0.0, wc])
@@ -286,7 +321,7 @@ class RouteScore:
         n_short = (geometry.count_in_polygons(pts, self.keep_vertices, self.keep_starts)
                    if len(self.keep_starts) > 1 else 0)  # fmt: skip
         if len(self.pads):
-            _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit)
+            _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit, self.pad_half)
         cov |= covered(self.samples, pts, self.width)
         return furthest, n_in, n_short, float(d.sum())
 
@@ -340,6 +375,12 @@ class RouteScore:
         return np.array([pos[0], pos[1], pos[2], -a * o, -a * (1.0 - o) * k])
 
 
+def route_score(route: Any) -> RouteScore:
+    """A fresh :class:`RouteScore` of ``route`` (a :class:`~cnt_env.task.routes.Route`)."""
+    return RouteScore(route.waypoints, route.width, route.pads, route.keepouts,
+                      pad_width=route.pad_width)  # fmt: skip
+
+
 def score_route_trace(trace: np.ndarray, route: Any,
                       n_after_step: np.ndarray | None = None) -> dict[str, float]:  # fmt: skip
     """Batch corridor Φ of a whole ``trace`` (n, 2) against ``route`` (a
@@ -349,7 +390,7 @@ def score_route_trace(trace: np.ndarray, route: Any,
     the env would have terminated."""
     pts = np.ascontiguousarray(trace, dtype=np.float64)
     cuts = [len(pts)] if n_after_step is None else [int(n) for n in n_after_step]
-    score = RouteScore(route.waypoints, route.width, route.pads, route.keepouts)
+    score = route_score(route)
     done = 0
     for n in cuts:  # frozen up to the previous cut: the walk is incremental
         m = score.update(pts[:n], done)
