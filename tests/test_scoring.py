@@ -121,13 +121,50 @@ def test_route_outside_pads_and_shorts() -> None:
     assert m["pads_crossed"] == 1 and m["shorts"] > 0 and m["outside"] > 0
     t = score.potentials(m)
     a = t[:3].sum()
-    o, k = m["outside"], min(1.0, 0.05 * m["shorts"])
+    o, k = m["outside"], min(1.0, 0.05 * m["short_length"])
     assert t.sum() == pytest.approx(a * (1 - o) * (1 - k))
     assert 0.0 <= t.sum() <= 1.0
     from cnt_env.task.routes import Route
 
     r = Route(line, 4.0, pads, keep)
     assert score_route_trace(zig, r)["score"] == pytest.approx(t.sum())
+
+
+@pytest.mark.parametrize("spacing", [1.0, 0.2, 0.05])
+def test_a_short_is_measured_in_length_whatever_the_node_spacing(spacing: float) -> None:
+    """A straight trace through a keep-out 6 L_vb wide: the short's length is 6 to within
+    one node spacing, and its penalty 0.05 per L_vb, on every mesh (the model lays nodes
+    0.2 L_vb apart, the surrogate 1). Counted per node, the 0.2 mesh paid 5x the 1's."""
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    keep = (rectangle(17.0, -3.0, 23.0, 3.0),)
+    across = _along(np.array([[20.0, -15.0], [20.0, 15.0]]), spacing)  # crosses it along z
+    score = RouteScore(line, 20.0, np.zeros((0, 2, 2)), keep)
+    m = score.update(across, len(across))
+    assert m["short_length"] == pytest.approx(6.0, abs=spacing)
+    assert m["shorts"] == pytest.approx(6.0 / spacing, abs=1.0)
+    terms = score.potentials(m)
+    a = terms[:3].sum()
+    assert terms[4] == pytest.approx(-a * (1.0 - m["outside"]) * 0.05 * m["short_length"])
+
+
+def test_a_short_node_at_the_frozen_boundary_keeps_both_halves() -> None:
+    """The length of a node in a keep-out is half of each of its segments, also when the
+    first of them ends the frozen part and the second begins the next update's."""
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    keep = (rectangle(9.5, -1.0, 10.5, 1.0),)
+    trace = np.column_stack([np.arange(0.0, 21.0), np.zeros(21)])  # one node, x = 10, inside
+    whole = RouteScore(line, 20.0, np.zeros((0, 2, 2)), keep).update(trace, 21)
+    assert whole["shorts"] == 1 and whole["short_length"] == pytest.approx(1.0)
+    for cut in (10, 11, 12):
+        inc = RouteScore(line, 20.0, np.zeros((0, 2, 2)), keep)
+        inc.update(trace[:cut], cut)
+        assert inc.update(trace, 21)["short_length"] == pytest.approx(1.0), cut
 
 
 # ---- pads as electrode strips (Route.pad_width) --------------------------------------------

@@ -159,10 +159,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     Routes (:class:`~cnt_env.task.scoring.RouteScore`): G = furthest arc length reached by
     trace inside the corridor / route length; P = pads met / pads (crossed, or entered as
     rectangles with the route's ``pad_width`` > 0); C = 1 once G = 1;
-    o = fraction of the episode's trace nodes outside the corridor; n_s = nodes in
-    keep-outs. A = (0.8 G + 0.2 P + 0.2 C) / (0.8 + 0.2 [pads] + 0.2),
-    Φ = A (1 - o)(1 - min(1, 0.05 n_s)) ∈ [0, 1]; terms ``progress``, ``pads``,
-    ``completion``, ``outside`` (-A o), ``short`` (-A (1 - o) min(1, 0.05 n_s)).
+    o = fraction of the episode's trace nodes outside the corridor; L_s = length of trace
+    in keep-outs (L_vb). A = (0.8 G + 0.2 P + 0.2 C) / (0.8 + 0.2 [pads] + 0.2),
+    Φ = A (1 - o)(1 - min(1, 0.05 L_s)) ∈ [0, 1]; terms ``progress``, ``pads``,
+    ``completion``, ``outside`` (-A o), ``short`` (-A (1 - o) min(1, 0.05 L_s)).
 
     Thin (:class:`~cnt_env.task.scoring.ThinScore`): coverage C (target length within τ_b
     of the trace), precision P (trace nodes within τ_b), progress G; Φ = w_c C + w_p P +
@@ -173,8 +173,9 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     ``info`` also holds ``coverage``, ``precision``, ``progress``, ``mean_distance``
     (L_vb), ``n_laid``, ``laid_length``, ``sim_time``, ``flow_vbar``, ``flow_phi``,
     ``target``, ``target_length``, ``is_success``, ``physics_steps``,
-    ``newton_iterations``; routes: ``inside``, ``outside``, ``shorts``, ``pads_crossed``,
-    ``n_pads``, ``completed``, ``route_width``, ``max_episode_steps``; and every
+    ``newton_iterations``; routes: ``inside``, ``outside``, ``shorts`` (nodes in
+    keep-outs), ``short_length`` (L_vb), ``pads_crossed``, ``n_pads``, ``completed``,
+    ``route_width``, ``max_episode_steps``; and every
     ``pattern_every`` steps and at the end, ``info["pattern"]`` (pattern measures,
     :func:`cnt_env.patterns.measure`).
 
@@ -685,7 +686,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             newton_iterations=int(newton_iterations),
         )
         if self.score_mode == "corridor":
-            for k in ("inside", "outside", "shorts", "pads_crossed", "n_pads", "completed"):
+            for k in ("inside", "outside", "shorts", "short_length", "pads_crossed", "n_pads",
+                      "completed"):  # fmt: skip
                 info[k] = metrics[k]
             info["route_width"] = self.target.width
             info["max_episode_steps"] = self.max_episode_steps

@@ -9,7 +9,7 @@ follower (its plan around keep-outs).
   boundary and its distance (the projection on each edge, clipped to the edge);
 * :func:`nearest_on_polygons`: the nearest boundary point over several polygons;
 * :func:`outward_normal`: the outward normal of the edge nearest a point;
-* :func:`inside_polygon` / :func:`count_in_polygons` (polygons packed by :func:`pack`):
+* :func:`inside_polygon` / :func:`in_polygons` (polygons packed by :func:`pack`):
   the even-odd rule (a point is inside when a ray along +x crosses the boundary an odd
   number of times), in one compiled kernel;
 * :func:`segments_cross` / :func:`segment_distance`: whether two segments properly cross,
@@ -26,7 +26,7 @@ from numba import njit
 
 __all__ = [
     "FAR",
-    "count_in_polygons",
+    "in_polygons",
     "inside_polygon",
     "nearest_on_boundary",
     "nearest_on_polygons",
@@ -111,7 +111,7 @@ def _inside_any(points, verts, starts, out):  # pragma: no cover - numba
 
 def pack(polygons: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
     """``(verts, starts)``: the polygons' vertices stacked (m, 2) and where each begins,
-    with the total m at the end (the layout of :func:`count_in_polygons`)."""
+    with the total m at the end (the layout of :func:`in_polygons`)."""
     if not polygons:
         return np.zeros((0, 2)), np.zeros(1, dtype=np.int64)
     verts = np.ascontiguousarray(np.concatenate(polygons), dtype=np.float64)
@@ -127,12 +127,12 @@ def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return out
 
 
-def count_in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray) -> int:
-    """How many of ``points`` (n, 2) lie inside any of the polygons packed by :func:`pack`
-    (``verts``, ``starts``)."""
+def in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Boolean (n,): which of ``points`` (n, 2) lie inside any of the polygons packed by
+    :func:`pack` (``verts``, ``starts``)."""
     out = np.empty(len(points), dtype=np.bool_)
     _inside_any(np.ascontiguousarray(points, dtype=np.float64), verts, starts, out)
-    return int(np.count_nonzero(out))
+    return out
 
 
 def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:

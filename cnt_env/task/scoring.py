@@ -182,8 +182,10 @@ ROUTE_TERMS = ("progress", "pads", "completion", "outside", "short")
 #: Default weights of the positive terms (progress, pads, completion), normalised over
 #: the terms a route has (no pads: progress and completion only).
 ROUTE_WEIGHTS = (0.8, 0.2, 0.2)
-#: Share of the score one trace node (~1 L_vb) inside a keep-out costs: 20 L_vb of trace
-#: in a keep-out (a short circuit) zero the score.
+#: Share of the score one L_vb of trace inside a keep-out costs: 20 L_vb of trace in a
+#: keep-out (a short circuit) zero the score. The length, not the node count, so the
+#: penalty is the same on every mesh (the model lays nodes 0.2 L_vb apart, the
+#: surrogate 1; per node, before 2026-12-07, it was 5x harsher on the model).
 SHORT_PENALTY = 0.05
 #: Largest step (in corridor half-widths) the progress may take from one trace node to the
 #: next: a node projects onto the route within this arc length ahead of the furthest point
@@ -278,11 +280,11 @@ class RouteScore:
     With G the progress (furthest arc length reached by trace inside the corridor, over
     the route length), P the fraction of pads crossed (or, with ``pad_width`` > 0,
     touched: a trace segment entering the strip of that width along the pad), C = 1 once
-    G = 1, o the fraction of trace nodes outside the corridor and n_s the nodes inside
-    keep-outs:
+    G = 1, o the fraction of trace nodes outside the corridor and L_s the length of trace
+    inside keep-outs (L_vb):
 
         A = (w_g G + w_p P + w_c C) / (w_g + w_p [pads] + w_c),
-        k = min(1, SHORT_PENALTY n_s) (0.05 per node),
+        k = min(1, SHORT_PENALTY L_s) (0.05 per L_vb),
         Φ = A (1 - o) (1 - k)  in [0, 1],
 
     split into the terms progress w_g G / W, pads w_p P / W, completion w_c C / W,
@@ -307,44 +309,58 @@ class RouteScore:
         self._furthest = 0.0
         self._n_in = 0
         self._n_short = 0
+        self._short_len = 0.0
         self._dist_sum = 0.0
         self._pads_hit = np.zeros(len(self.pads), dtype=np.bool_)
         self._cov = np.zeros(len(self.sample_s), dtype=np.bool_)
 
-    def _scan(self, pts: np.ndarray, joint: np.ndarray, furthest: float,
-              pads_hit: np.ndarray, cov: np.ndarray) -> tuple[float, int, int, float]:  # fmt: skip
+    def _scan(self, pts: np.ndarray, joint: np.ndarray, furthest: float, pads_hit: np.ndarray,
+              cov: np.ndarray) -> tuple[float, int, int, float, float]:  # fmt: skip
         """Walk ``pts`` on from the state given (``pads_hit`` and ``cov`` updated in
-        place); ``joint``: the node before them (0 or 1 rows), for the pad crossings."""
+        place); ``joint``: the node before them (0 or 1 rows), for the pad crossings and
+        the short's length. Returns the furthest arc length, the nodes inside the
+        corridor, the nodes in keep-outs, their length and the sum of distances."""
         furthest = _walk(pts, self.waypoints, self.cum_s, self.width, self.jump, furthest)
         d = distances(pts, self.waypoints)
         n_in = int(np.count_nonzero(d <= self.width))
-        n_short = (geometry.count_in_polygons(pts, self.keep_vertices, self.keep_starts)
-                   if len(self.keep_starts) > 1 else 0)  # fmt: skip
+        n_short, short_len = 0, 0.0
+        if len(self.keep_starts) > 1:
+            both = np.concatenate([joint, pts])
+            inside = geometry.in_polygons(both, self.keep_vertices, self.keep_starts)
+            n_short = int(np.count_nonzero(inside[len(joint) :]))
+            if inside.any():  # the joint's half of its segment to pts[0] counts here
+                # each segment ending in pts, half for each end inside: a node's half of
+                # its two segments (the trace's length in the keep-out, to one spacing)
+                seg = np.hypot(*np.diff(both, axis=0).T)
+                short_len = float(np.dot(seg, 0.5 * (inside[:-1] + inside[1:].astype(float))))
         if len(self.pads):
             _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit, self.pad_half)
         cov |= covered(self.samples, pts, self.width)
-        return furthest, n_in, n_short, float(d.sum())
+        return furthest, n_in, n_short, short_len, float(d.sum())
 
     def update(self, trace: np.ndarray, n_frozen: int) -> dict[str, Any]:
         """Metrics of the episode's ``trace`` (n, 2), whose first ``n_frozen`` nodes never
         move again: ``progress``, ``furthest`` (L_vb), ``pads_crossed``, ``completed``,
         ``inside`` (fraction of nodes in the corridor; also as ``precision``),
-        ``outside``, ``shorts`` (nodes in keep-outs), ``coverage`` (fraction of the
+        ``outside``, ``shorts`` (nodes in keep-outs), ``short_length`` (L_vb of trace in
+        keep-outs: each inside node's half of its two segments), ``coverage`` (fraction of the
         route's length with trace within w), ``mean_distance`` and ``n_laid``."""
         trace = np.ascontiguousarray(trace, dtype=np.float64)
         frozen_end = max(0, min(len(trace), n_frozen))
         if frozen_end > self._frozen_upto:
             a = self._frozen_upto
-            f, n_in, n_s, dsum = self._scan(trace[a:frozen_end], trace[max(0, a - 1) : a],
-                                            self._furthest, self._pads_hit, self._cov)  # fmt: skip
+            f, n_in, n_s, s_len, dsum = self._scan(
+                trace[a:frozen_end], trace[max(0, a - 1) : a], self._furthest, self._pads_hit,
+                self._cov)  # fmt: skip
             self._furthest, self._frozen_upto = f, frozen_end
             self._n_in += n_in
             self._n_short += n_s
+            self._short_len += s_len
             self._dist_sum += dsum
         pads_hit, cov = self._pads_hit.copy(), self._cov.copy()
         a = frozen_end
-        f, n_in, n_s, dsum = self._scan(trace[a:], trace[max(0, a - 1) : a], self._furthest,
-                                        pads_hit, cov)  # fmt: skip
+        f, n_in, n_s, s_len, dsum = self._scan(trace[a:], trace[max(0, a - 1) : a],
+                                               self._furthest, pads_hit, cov)  # fmt: skip
         n_laid = len(trace)
         n_in += self._n_in
         n_short = n_s + self._n_short
@@ -359,6 +375,7 @@ class RouteScore:
             "precision": inside,
             "outside": (n_laid - n_in) / n_laid if n_laid else 0.0,
             "shorts": n_short,
+            "short_length": self._short_len + s_len,
             "coverage": float(np.dot(self.sample_w, cov)),
             "mean_distance": (self._dist_sum + dsum) / n_laid if n_laid else 0.0,
             "n_laid": n_laid,
@@ -371,7 +388,7 @@ class RouteScore:
         pos = w * np.array([metrics["progress"], pads, float(metrics["completed"])])
         a = float(pos.sum())
         o = metrics["outside"]
-        k = min(1.0, SHORT_PENALTY * metrics["shorts"])
+        k = min(1.0, SHORT_PENALTY * metrics["short_length"])
         return np.array([pos[0], pos[1], pos[2], -a * o, -a * (1.0 - o) * k])
 
 
