@@ -24,8 +24,8 @@ __all__ = [
 ]
 
 #: ``info`` keys of CNTDeposit-v0 logged at each episode's end (those present).
-TASK_METRICS = ("score", "coverage", "progress", "precision", "inside", "shorts", "completed",
-                "is_success", "laid_length")  # fmt: skip
+TASK_METRICS = ("score", "coverage", "progress", "precision", "inside", "shorts", "short_length",
+                "completed", "is_success", "laid_length")  # fmt: skip
 
 
 def schedule(value: Any) -> Any:
