@@ -9,6 +9,7 @@ from cnt_env.task.geometry import (
     FAR,
     in_polygons,
     inside_polygon,
+    length_in_polygons,
     nearest_on_boundary,
     nearest_on_polygons,
     outward_normal,
@@ -80,3 +81,21 @@ def test_outward_normal_points_out_of_each_edge_whatever_the_winding(order: int)
     # a closed ring: its zero-length edge is skipped
     np.testing.assert_allclose(outward_normal(np.array([5.0, 0.0]), np.vstack([poly, poly[:1]])),
                                [0, -1], atol=1e-12)  # fmt: skip
+
+
+def test_length_in_polygons_closed_forms() -> None:
+    """The length of a polyline inside packed polygons: a crossing of the square, a run
+    along the concave L (in, out over its notch, in again), two overlapping squares
+    counted once, an edge touched only at a corner, and no polygon."""
+    across = np.array([[-5.0, 5.0], [15.0, 5.0]])
+    assert length_in_polygons(across, *pack((SQUARE,))) == pytest.approx(10.0)
+    high = np.array([[-5.0, 7.5], [15.0, 7.5]])  # through the L's upper arm only
+    assert length_in_polygons(high, *pack((ELL,))) == pytest.approx(5.0)
+    # a polyline, its nodes on both sides and one inside
+    bent = np.array([[-5.0, 2.0], [3.0, 2.0], [3.0, 20.0]])
+    assert length_in_polygons(bent, *pack((SQUARE,))) == pytest.approx(3.0 + 8.0)
+    shifted = SQUARE + np.array([5.0, 0.0])  # overlaps SQUARE over x in [5, 10]
+    assert length_in_polygons(across, *pack((SQUARE, shifted))) == pytest.approx(15.0)
+    corner = np.array([[-5.0, -5.0], [0.0, 0.0], [-5.0, 5.0]])
+    assert length_in_polygons(corner, *pack((SQUARE,))) == pytest.approx(0.0)
+    assert length_in_polygons(across, *pack(())) == 0.0

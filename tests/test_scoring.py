@@ -132,9 +132,9 @@ def test_route_outside_pads_and_shorts() -> None:
 
 @pytest.mark.parametrize("spacing", [1.0, 0.2, 0.05])
 def test_a_short_is_measured_in_length_whatever_the_node_spacing(spacing: float) -> None:
-    """A straight trace through a keep-out 6 L_vb wide: the short's length is 6 to within
-    one node spacing, and its penalty 0.05 per L_vb, on every mesh (the model lays nodes
-    0.2 L_vb apart, the surrogate 1). Counted per node, the 0.2 mesh paid 5x the 1's."""
+    """A straight trace through a keep-out 6 L_vb wide: the short's length is 6, and its
+    penalty 0.05 per L_vb, on every mesh (the model lays nodes 0.2 L_vb apart, the
+    surrogate 1). Counted per node, the 0.2 mesh paid 5x the 1's."""
     from cnt_env.task.routes import rectangle
     from cnt_env.task.scoring import RouteScore
 
@@ -143,16 +143,16 @@ def test_a_short_is_measured_in_length_whatever_the_node_spacing(spacing: float)
     across = _along(np.array([[20.0, -15.0], [20.0, 15.0]]), spacing)  # crosses it along z
     score = RouteScore(line, 20.0, np.zeros((0, 2, 2)), keep)
     m = score.update(across, len(across))
-    assert m["short_length"] == pytest.approx(6.0, abs=spacing)
+    assert m["short_length"] == pytest.approx(6.0, abs=1e-9)
     assert m["shorts"] == pytest.approx(6.0 / spacing, abs=1.0)
     terms = score.potentials(m)
     a = terms[:3].sum()
     assert terms[4] == pytest.approx(-a * (1.0 - m["outside"]) * 0.05 * m["short_length"])
 
 
-def test_a_short_node_at_the_frozen_boundary_keeps_both_halves() -> None:
-    """The length of a node in a keep-out is half of each of its segments, also when the
-    first of them ends the frozen part and the second begins the next update's."""
+def test_a_short_at_the_frozen_boundary_is_counted_once() -> None:
+    """The segments in a keep-out count once, also when one ends the frozen part and the
+    next begins the next update's (the keep-out [9.5, 10.5] on a line of nodes 1 apart)."""
     from cnt_env.task.routes import rectangle
     from cnt_env.task.scoring import RouteScore
 
@@ -165,6 +165,22 @@ def test_a_short_node_at_the_frozen_boundary_keeps_both_halves() -> None:
         inc = RouteScore(line, 20.0, np.zeros((0, 2, 2)), keep)
         inc.update(trace[:cut], cut)
         assert inc.update(trace, 21)["short_length"] == pytest.approx(1.0), cut
+
+
+@pytest.mark.parametrize("spacing", [1.0, 0.2])
+def test_a_wire_thinner_than_the_node_spacing_is_a_short(spacing: float) -> None:
+    """A neighbouring wire 0.3 L_vb wide, crossed at 45 degrees by a trace whose nodes
+    step over it: the short is the chord 0.3 sqrt(2) whether or not a node lands inside."""
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    wire = (rectangle(20.35, -30.0, 20.65, 30.0),)
+    diag = _along(np.array([[10.0, -10.0], [30.0, 10.0]]), spacing)
+    m = RouteScore(line, 20.0, np.zeros((0, 2, 2)), wire).update(diag, len(diag))
+    assert m["short_length"] == pytest.approx(0.3 * np.sqrt(2.0), rel=1e-9)
+    if spacing == 1.0:
+        assert m["shorts"] == 0  # no node inside: counted per node, no short at all
 
 
 # ---- pads as electrode strips (Route.pad_width) --------------------------------------------

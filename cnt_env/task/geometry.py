@@ -9,9 +9,10 @@ follower (its plan around keep-outs).
   boundary and its distance (the projection on each edge, clipped to the edge);
 * :func:`nearest_on_polygons`: the nearest boundary point over several polygons;
 * :func:`outward_normal`: the outward normal of the edge nearest a point;
-* :func:`inside_polygon` / :func:`in_polygons` (polygons packed by :func:`pack`):
-  the even-odd rule (a point is inside when a ray along +x crosses the boundary an odd
-  number of times), in one compiled kernel;
+* :func:`inside_polygon` / :func:`in_polygons` (polygons packed by :func:`pack`): the
+  even-odd rule (a point is inside when a ray along +x crosses the boundary an odd number
+  of times), in one compiled kernel; :func:`length_in_polygons`: the length of a
+  polyline inside them;
 * :func:`segments_cross` / :func:`segment_distance`: whether two segments properly cross,
   and the distance between them (0 when they meet); used to check a route's parts
   against one another (``routes.Route``).
@@ -28,6 +29,7 @@ __all__ = [
     "FAR",
     "in_polygons",
     "inside_polygon",
+    "length_in_polygons",
     "nearest_on_boundary",
     "nearest_on_polygons",
     "outward_normal",
@@ -89,24 +91,67 @@ def nearest_on_polygons(point: np.ndarray, polygons: tuple[np.ndarray, ...]) -> 
 
 
 @njit(cache=True)
+def _in_any(px, pz, verts, starts):  # pragma: no cover - numba
+    """Whether (px, pz) lies inside one of the packed polygons, by the even-odd rule."""
+    for k in range(starts.shape[0] - 1):
+        a, b = starts[k], starts[k + 1]
+        inside = False
+        for j in range(a, b):
+            jj = j + 1 if j + 1 < b else a
+            x0, z0, x1, z1 = verts[j, 0], verts[j, 1], verts[jj, 0], verts[jj, 1]
+            # the edge straddles the ray's z, and crosses it at x > px
+            if (z0 > pz) != (z1 > pz) and px < x0 + (pz - z0) * (x1 - x0) / (z1 - z0):
+                inside = not inside
+        if inside:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _inside_any(points, verts, starts, out):  # pragma: no cover - numba
     """``out[i]`` = points[i] lies inside one of the polygons (vertices ``verts``, polygon
     k from ``starts[k]`` to ``starts[k + 1]``), by the even-odd rule."""
     for i in range(points.shape[0]):
-        px, pz = points[i, 0], points[i, 1]
-        out[i] = False
+        out[i] = _in_any(points[i, 0], points[i, 1], verts, starts)
+
+
+@njit(cache=True)
+def _length_inside(points, verts, starts):  # pragma: no cover - numba
+    """Length of the polyline ``points`` inside the union of the packed polygons: each
+    segment is cut where it crosses an edge, and a piece counts when its midpoint is
+    inside (exact for any node spacing; a wall thinner than it is not skipped)."""
+    total = 0.0
+    ts = np.empty(verts.shape[0] + 2)
+    for i in range(points.shape[0] - 1):
+        cx, cz = points[i, 0], points[i, 1]
+        ux, uz = points[i + 1, 0] - cx, points[i + 1, 1] - cz
+        length = math.sqrt(ux * ux + uz * uz)
+        if length == 0.0:
+            continue
+        ts[0], ts[1] = 0.0, 1.0
+        n = 2
         for k in range(starts.shape[0] - 1):
             a, b = starts[k], starts[k + 1]
-            inside = False
             for j in range(a, b):
                 jj = j + 1 if j + 1 < b else a
-                x0, z0, x1, z1 = verts[j, 0], verts[j, 1], verts[jj, 0], verts[jj, 1]
-                # the edge straddles the ray's z, and crosses it at x > px
-                if (z0 > pz) != (z1 > pz) and px < x0 + (pz - z0) * (x1 - x0) / (z1 - z0):
-                    inside = not inside
-            if inside:
-                out[i] = True
-                break
+                x0, z0 = verts[j, 0], verts[j, 1]
+                ex, ez = verts[jj, 0] - x0, verts[jj, 1] - z0
+                den = ux * ez - uz * ex
+                if den == 0.0:  # parallel: the pieces' midpoints decide
+                    continue
+                t = ((x0 - cx) * ez - (z0 - cz) * ex) / den
+                s = ((x0 - cx) * uz - (z0 - cz) * ux) / den
+                if 0.0 < t < 1.0 and 0.0 <= s <= 1.0:
+                    ts[n] = t
+                    n += 1
+        cuts = np.sort(ts[:n])
+        for m in range(n - 1):
+            t0, t1 = cuts[m], cuts[m + 1]
+            if t1 > t0:
+                tm = 0.5 * (t0 + t1)
+                if _in_any(cx + tm * ux, cz + tm * uz, verts, starts):
+                    total += (t1 - t0) * length
+    return total
 
 
 def pack(polygons: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -125,6 +170,12 @@ def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     out = np.empty(len(points), dtype=np.bool_)
     _inside_any(np.ascontiguousarray(points, dtype=np.float64), verts, starts, out)
     return out
+
+
+def length_in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray) -> float:
+    """Length of the polyline ``points`` (n, 2) inside the polygons packed by :func:`pack`
+    (their union; the even-odd rule), cut exactly at the polygons' edges."""
+    return float(_length_inside(np.ascontiguousarray(points, dtype=np.float64), verts, starts))
 
 
 def in_polygons(points: np.ndarray, verts: np.ndarray, starts: np.ndarray) -> np.ndarray:

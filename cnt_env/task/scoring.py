@@ -183,9 +183,10 @@ ROUTE_TERMS = ("progress", "pads", "completion", "outside", "short")
 #: the terms a route has (no pads: progress and completion only).
 ROUTE_WEIGHTS = (0.8, 0.2, 0.2)
 #: Share of the score one L_vb of trace inside a keep-out costs: 20 L_vb of trace in a
-#: keep-out (a short circuit) zero the score. The length, not the node count, so the
-#: penalty is the same on every mesh (the model lays nodes 0.2 L_vb apart, the
-#: surrogate 1; per node, before 2026-12-07, it was 5x harsher on the model).
+#: keep-out (a short circuit) zero the score. The length (segments cut at the keep-outs'
+#: edges), not the node count, so the penalty is the same on every mesh (the model lays
+#: nodes 0.2 L_vb apart, the surrogate 1; per node, before 2026-12-07, it was 5x harsher
+#: on the model) and a wire thinner than the spacing is not stepped over.
 SHORT_PENALTY = 0.05
 #: Largest step (in corridor half-widths) the progress may take from one trace node to the
 #: next: a node projects onto the route within this arc length ahead of the furthest point
@@ -325,14 +326,10 @@ class RouteScore:
         n_in = int(np.count_nonzero(d <= self.width))
         n_short, short_len = 0, 0.0
         if len(self.keep_starts) > 1:
-            both = np.concatenate([joint, pts])
-            inside = geometry.in_polygons(both, self.keep_vertices, self.keep_starts)
-            n_short = int(np.count_nonzero(inside[len(joint) :]))
-            if inside.any():  # the joint's half of its segment to pts[0] counts here
-                # each segment ending in pts, half for each end inside: a node's half of
-                # its two segments (the trace's length in the keep-out, to one spacing)
-                seg = np.hypot(*np.diff(both, axis=0).T)
-                short_len = float(np.dot(seg, 0.5 * (inside[:-1] + inside[1:].astype(float))))
+            keep = (self.keep_vertices, self.keep_starts)
+            n_short = int(np.count_nonzero(geometry.in_polygons(pts, *keep)))
+            # the segments ending in pts (from the joint on), cut at the keep-outs' edges
+            short_len = geometry.length_in_polygons(np.concatenate([joint, pts]), *keep)
         if len(self.pads):
             _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit, self.pad_half)
         cov |= covered(self.samples, pts, self.width)
@@ -343,7 +340,7 @@ class RouteScore:
         move again: ``progress``, ``furthest`` (L_vb), ``pads_crossed``, ``completed``,
         ``inside`` (fraction of nodes in the corridor; also as ``precision``),
         ``outside``, ``shorts`` (nodes in keep-outs), ``short_length`` (L_vb of trace in
-        keep-outs: each inside node's half of its two segments), ``coverage`` (fraction of the
+        keep-outs, its segments cut at their edges), ``coverage`` (fraction of the
         route's length with trace within w), ``mean_distance`` and ``n_laid``."""
         trace = np.ascontiguousarray(trace, dtype=np.float64)
         frozen_end = max(0, min(len(trace), n_frozen))
