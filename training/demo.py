@@ -20,7 +20,7 @@
    installed (``pip install -e ".[rerun]"``), else a message.
 
 The short run is for show: 2 560 samples (5 PPO updates, ~2 minutes) leave it about the
-follower it starts from (0.969 against the follower's 0.966 on the default routes; 106 s
+follower it starts from (0.970 against the follower's 0.966 on the default routes; 97 s
 of training on an AMD EPYC of 2 cores, 2026-12-07, the same policy in two runs), far
 from the pretrained residual agent, whose training (``cnt-train``, configs in
 ``training/configs``) took an hour (training/README.md). Its ``best_model.zip`` is
