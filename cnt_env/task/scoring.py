@@ -225,13 +225,11 @@ def _walk(points, verts, cum_s, width, jump, furthest):  # pragma: no cover - nu
 
 
 @njit(cache=True)
-def _touches_strip(cx, cz, dx, dz, ax, az, bx, bz, half):  # pragma: no cover - numba
-    """Whether segment c-d meets the rectangle of half-width ``half`` along segment a-b
-    (an electrode strip, boundary included): Liang-Barsky clipping of c-d in the strip's
-    frame, u along a-b in [0, |ab|] and v across it in [-half, half]."""
-    ex, ez = bx - ax, bz - az
-    length = math.sqrt(ex * ex + ez * ez)
-    ex, ez = ex / length, ez / length
+def _touches_strip(cx, cz, dx, dz, ax, az, ex, ez, length, half):  # pragma: no cover - numba
+    """Whether segment c-d meets the rectangle of half-width ``half`` along the pad from a
+    with unit direction (ex, ez) and ``length`` (an electrode strip, boundary included):
+    Liang-Barsky clipping of c-d in the strip's frame, u along the pad in [0, length] and
+    v across it in [-half, half]."""
     uc = (cx - ax) * ex + (cz - az) * ez
     vc = (cz - az) * ex - (cx - ax) * ez
     du = (dx - cx) * ex + (dz - cz) * ez
@@ -257,11 +255,14 @@ def _mark_crossed(points, pads, hit, half):  # pragma: no cover - numba
             continue
         ax, az = pads[k, 0, 0], pads[k, 0, 1]
         bx, bz = pads[k, 1, 0], pads[k, 1, 1]
+        ex, ez = bx - ax, bz - az  # the strip's frame, once per pad
+        length = math.sqrt(ex * ex + ez * ez)
+        ex, ez = ex / length, ez / length
         for i in range(points.shape[0] - 1):
             cx, cz = points[i, 0], points[i, 1]
             dx, dz = points[i + 1, 0], points[i + 1, 1]
             if half > 0.0:
-                if _touches_strip(cx, cz, dx, dz, ax, az, bx, bz, half):
+                if _touches_strip(cx, cz, dx, dz, ax, az, ex, ez, length, half):
                     hit[k] = True
                     break
                 continue
@@ -324,14 +325,14 @@ class RouteScore:
         furthest = _walk(pts, self.waypoints, self.cum_s, self.width, self.jump, furthest)
         d = distances(pts, self.waypoints)
         n_in = int(np.count_nonzero(d <= self.width))
+        both = np.concatenate([joint, pts])  # the segments ending in pts, from the joint on
         n_short, short_len = 0, 0.0
         if len(self.keep_starts) > 1:
             keep = (self.keep_vertices, self.keep_starts)
             n_short = int(np.count_nonzero(geometry.in_polygons(pts, *keep)))
-            # the segments ending in pts (from the joint on), cut at the keep-outs' edges
-            short_len = geometry.length_in_polygons(np.concatenate([joint, pts]), *keep)
+            short_len = geometry.length_in_polygons(both, *keep)  # cut at the edges
         if len(self.pads):
-            _mark_crossed(np.concatenate([joint, pts]), self.pads, pads_hit, self.pad_half)
+            _mark_crossed(both, self.pads, pads_hit, self.pad_half)
         cov |= covered(self.samples, pts, self.width)
         return furthest, n_in, n_short, short_len, float(d.sum())
 
