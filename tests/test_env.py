@@ -884,6 +884,40 @@ def test_degenerate_route_raises_and_the_env_stays_usable(rkw: dict, bad) -> Non
     env.reset(seed=0, options={"target": [[0, 0], [30, 0]]})
 
 
+def test_image_observation_shows_the_routes_corridor_keepouts_and_pads(rkw: dict) -> None:
+    """The default image layers show what the score counts: a keep-out or a pad changes
+    the image; "path" (the image before) shows only the route's line, so it does not."""
+    from cnt_env.task import raster
+
+    open_route = {"waypoints": [[0, 0], [40, 0], [40, 30]], "width": 6.0}
+    keep = dict(open_route, keepouts=[{"rect": [10, 10, 25, 20]}])
+    pads = dict(open_route, pads=[[[30, -8], [30, 8]]], pad_width=4.0)
+    obs: dict[tuple[str, str], np.ndarray] = {}
+    for layers in ("route", "path"):
+        env = CNTDepositEnv(**rkw, obs_mode="image", image_layers=layers)
+        for name, route in (("open", open_route), ("keep", keep), ("pads", pads)):
+            obs[layers, name] = env.reset(seed=0, options={"target": route})[0]
+            assert env.observation_space.contains(obs[layers, name])
+    assert np.array_equal(obs["path", "open"], obs["path", "keep"])
+    assert np.array_equal(obs["path", "open"], obs["path", "pads"])
+    route_open = obs["route", "open"]
+    # the view is centred on the route's start; the band: pixel centres within 6 L_vb of
+    # the first leg, (0, 0)-(40, 0) (the second, at x = 40, is out of the view)
+    k = np.arange(64) + 0.5 - 32
+    x, z = np.meshgrid(k, k[::-1])
+    band = np.hypot(np.maximum.reduce([-x, np.zeros_like(x), x - 40]), z) <= 6.0
+    assert np.array_equal(route_open[..., 1] > 0, band)
+    assert np.count_nonzero(route_open[..., 1] == raster.CORRIDOR_VALUE) > 12 * 30
+    assert not np.any(route_open[..., 2] == raster.KEEPOUT_VALUE)
+    assert np.count_nonzero(obs["route", "keep"][..., 2] == raster.KEEPOUT_VALUE) >= 15 * 10
+    assert np.count_nonzero(obs["route", "pads"][..., 2] == raster.PAD_VALUE) >= 4 * 16
+    # the trace and the route's line are the same pixels in both layer sets
+    for name in ("open", "keep", "pads"):
+        assert np.array_equal(obs["route", name][..., 0], obs["path", name][..., 0])
+    with pytest.raises(ValueError, match="image_layers"):
+        CNTDepositEnv(**rkw, obs_mode="image", image_layers="all")
+
+
 def test_route_episode_truncates_at_its_length_and_completes(rkw: dict) -> None:
     env = CNTDepositEnv(**rkw)
     env.reset(seed=0, options={"target": [[0.0, 0.0], [0.0, -400.0]]})

@@ -73,6 +73,7 @@ DEFAULT_MAX_EPISODE_STEPS = MAX_EPISODE_STEPS
 #: Most physics steps one control step may take.
 MAX_SUBSTEPS = 100_000
 OBS_MODES = ("vector", "image")
+IMAGE_LAYERS = ("route", "path")
 #: How render() draws (the env's ``render_style``).
 RENDER_STYLES = ("figure", "raster")
 _REWARD_KEYS = {
@@ -148,7 +149,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     ``obs_mode="image"``: ``Box(0, 255, (S, S, 3), uint8)``, S = ``image_size`` (>= 64), a
     top view ``image_extent`` L_vb square centred on the contact point (x right, z up):
     channel 0 the trace (255 this episode, 128 before), 1 the target (128 where reached),
-    2 the suspended rod (:mod:`cnt_env.task.raster`).
+    2 the suspended rod (:mod:`cnt_env.task.raster`). Routes with ``image_layers="route"``
+    (the default) also show, beneath those, the corridor in channel 1 (64) and the
+    keep-outs (96, filled) and pads (160; rectangles when ``pad_width`` > 0) in channel 2;
+    ``"path"`` leaves them out (the image before 2026-12-07).
 
     ## Rewards
 
@@ -256,6 +260,8 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `obs_mode`         | "vector"     | "vector" or "image"                             |
     | `image_size`       | 64           | S of the image observation (>= 64 pixels)       |
     | `image_extent`     | 64.0         | side of the image observation (L_vb)            |
+    | `image_layers`     | "route"      | "route": the image shows the corridor, pads and |
+    |                    |              | keep-outs; "path": only the route's line        |
     | `render_size`      | 512          | side of the rendered frame (pixels)             |
     | `render_style`     | "figure"     | "figure": fixed extent per episode, legend,     |
     |                    |              | scale bar (L_vb, µm), matplotlib; "raster":     |
@@ -338,6 +344,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         obs_mode: str = "vector",
         image_size: int = 64,
         image_extent: float = 64.0,
+        image_layers: str = "route",
         render_size: int = 512,
         render_style: str = "figure",
         pattern_every: int = 50,
@@ -402,6 +409,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.obs_mode = s.choice("obs_mode", obs_mode, OBS_MODES)
         self.image_size = s.count("image_size", image_size, minimum=64)
         self.image_extent = s.positive("image_extent", image_extent)
+        self.image_layers = s.choice("image_layers", image_layers, IMAGE_LAYERS)
         self.render_size = s.count("render_size", render_size, minimum=16)
         self.render_style = s.choice("render_style", render_style, RENDER_STYLES)
         self._renderer: Any = None  # plotting.TopViewRenderer of the episode (figure style)
@@ -697,9 +705,14 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     def _observation(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
         sim = self._sim
         if self.obs_mode == "image":
+            layers = None
+            if self.score_mode == "corridor" and self.image_layers == "route":
+                layers = raster.RouteLayers(self.target.width, self._pads_abs,
+                                            self.target.pad_width, self._keepouts_abs)  # fmt: skip
             return raster.image_observation(
                 self.image_size, self.image_extent, trace[:, [0, 2]], self._n0,
                 self._target_abs, self._target_done(metrics), sim.suspended_nodes[:, [0, 2]],
+                layers,
             )  # fmt: skip
         m = self.n_target_points
         s_ahead = np.minimum(metrics["furthest"] + self.target_spacing * np.arange(1, m + 1),

@@ -8,11 +8,20 @@ Pixel coordinates are (col, row-from-bottom): x to the right, z up. Images are u
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["Window", "draw", "image_observation", "path_head", "top_view"]
+from cnt_env.task import geometry, scoring
+
+__all__ = ["RouteLayers", "Window", "draw", "image_observation", "path_head", "top_view"]
+
+#: Values of the route's layers in the image observation (``image_layers="route"``):
+#: channel 1, the corridor band under the route's line (255; 128 where reached);
+#: channel 2, keep-outs and pads under the suspended rod (255).
+CORRIDOR_VALUE = 64
+KEEPOUT_VALUE = 96
+PAD_VALUE = 160
 
 
 def draw(img: np.ndarray, points: np.ndarray, color: int | tuple[int, int, int],
@@ -61,15 +70,71 @@ def _pixels(centre: np.ndarray, scale: float, size: int):
     return px
 
 
+class RouteLayers(NamedTuple):
+    """What the image observation shows of a route besides its line (absolute, L_vb):
+    the corridor half-width, the pads (p, 2, 2) with their width, the keep-outs."""
+
+    width: float
+    pads: np.ndarray
+    pad_width: float
+    keepouts: tuple[np.ndarray, ...]
+
+
+def _pixel_centres(centre: np.ndarray, scale: float, size: int) -> np.ndarray:
+    """World (x, z) of every pixel's centre, (size * size, 2) in the image's row-major
+    order (rows top-down): the inverse of ``_pixels`` at col + 0.5, row-from-bottom + 0.5."""
+    k = (np.arange(size) + 0.5 - 0.5 * size) / scale
+    x = np.tile(centre[0] + k, size)
+    z = np.repeat(centre[1] + k[::-1], size)
+    return np.column_stack([x, z])
+
+
+def _in_strips(points: np.ndarray, pads: np.ndarray, half: float) -> np.ndarray:
+    """Which ``points`` (n, 2) lie in any pad's rectangle: ``half`` either side of the
+    pad's segment, flat ends at its ends (the strip of ``scoring._touches_strip``)."""
+    hit = np.zeros(len(points), dtype=bool)
+    for a, b in pads:
+        e = b - a
+        length = float(np.hypot(*e))
+        if length == 0.0:
+            continue
+        e = e / length
+        d = points - a
+        u = d @ e
+        v = d[:, 1] * e[0] - d[:, 0] * e[1]
+        hit |= (u >= 0.0) & (u <= length) & (np.abs(v) <= half)
+    return hit
+
+
 def image_observation(size: int, extent: float, trace_xz: np.ndarray, n0: int,
                       target: np.ndarray, target_done: np.ndarray | None,
-                      rod_xz: np.ndarray) -> np.ndarray:  # fmt: skip
+                      rod_xz: np.ndarray,
+                      route: RouteLayers | None = None) -> np.ndarray:  # fmt: skip
     """The ``(size, size, 3)`` uint8 image observation: ``extent`` L_vb square centred on
     the contact point (the last of ``trace_xz``). Channel 0: the trace (255 laid since node
     ``n0``, 128 before); channel 1: the target (255, and 128 over ``target_done``, the part
-    already reached); channel 2: the suspended rod's horizontal projection."""
+    already reached); channel 2: the suspended rod's horizontal projection.
+
+    With ``route``, the route's layers lie under those: in channel 1 the corridor
+    (``CORRIDOR_VALUE`` where a pixel's centre is within ``width`` of the target line, the
+    score's "inside"), in channel 2 the keep-outs filled (``KEEPOUT_VALUE``) and the pads
+    (``PAD_VALUE``: the line, and its rectangle when ``pad_width`` > 0)."""
     img = np.zeros((size, size, 3), dtype=np.uint8)
-    px = _pixels(trace_xz[-1], size / extent, size)
+    scale = size / extent
+    px = _pixels(trace_xz[-1], scale, size)
+    if route is not None:
+        centres = _pixel_centres(trace_xz[-1], scale, size)
+        band = scoring.distances(centres, target) <= route.width
+        img[..., 1].flat[band] = CORRIDOR_VALUE
+        if route.keepouts:
+            inside = geometry.in_polygons(centres, *geometry.pack(route.keepouts))
+            img[..., 2].flat[inside] = KEEPOUT_VALUE
+        if len(route.pads):
+            if route.pad_width > 0.0:
+                strips = _in_strips(centres, route.pads, 0.5 * route.pad_width)
+                img[..., 2].flat[strips] = PAD_VALUE
+            for pad in route.pads:
+                draw(img, px(pad), PAD_VALUE, channel=2)
     draw(img, px(trace_xz[:n0]), 128, channel=0)
     draw(img, px(trace_xz[n0 - 1 :]), 255, channel=0)
     draw(img, px(target), 255, channel=1)

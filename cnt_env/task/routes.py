@@ -502,13 +502,15 @@ def held_out(name: str) -> Route:
     return from_dict({**specs[name], "name": name})
 
 
+#: The keys of the route dict format (module doc), in the order the error text lists them.
+ROUTE_KEYS = ("waypoints", "width", "pads", "pad_width", "keepouts", "name", "params")
+
+
 def from_dict(spec: Mapping[str, Any]) -> Route:
     """A Route from the dict format (module doc), translated to start at the origin."""
-    known = {"waypoints", "width", "pads", "pad_width", "keepouts", "name", "params"}
-    unknown = set(spec) - known
+    unknown = set(spec) - set(ROUTE_KEYS)
     if unknown:
-        raise ValueError(f"unknown route keys {sorted(unknown)}; known: waypoints, width, "
-                         "pads, pad_width, keepouts, name")  # fmt: skip
+        raise ValueError(f"unknown route keys {sorted(unknown)}; known: {', '.join(ROUTE_KEYS)}")
     if "waypoints" not in spec:
         raise ValueError("a route dict needs 'waypoints': [[x, z], ...]")
     pts = targets_mod.validated_polyline(spec["waypoints"])
