@@ -573,9 +573,11 @@ def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
     """Write ``<stem>.npz`` (obs and return running statistics) and ``<stem>.json``
     (settings) for the VecNormalize ``venv``."""
     stem = Path(stem)
-    arrays = {"obs_mean": venv.obs_rms.mean, "obs_var": venv.obs_rms.var,
-              "obs_count": np.array(venv.obs_rms.count), "ret_mean": venv.ret_rms.mean,
-              "ret_var": venv.ret_rms.var, "ret_count": np.array(venv.ret_rms.count)}  # fmt: skip
+    arrays = {"ret_mean": venv.ret_rms.mean, "ret_var": venv.ret_rms.var,
+              "ret_count": np.array(venv.ret_rms.count)}  # fmt: skip
+    if venv.norm_obs:  # VecNormalize keeps no observation statistics without norm_obs
+        arrays |= {"obs_mean": venv.obs_rms.mean, "obs_var": venv.obs_rms.var,
+                   "obs_count": np.array(venv.obs_rms.count)}  # fmt: skip
     npz = stem.with_suffix(".npz")
     np.savez(npz, **arrays)
     meta = {"clip_obs": venv.clip_obs, "clip_reward": venv.clip_reward, "gamma": venv.gamma,
@@ -599,9 +601,12 @@ def load_vecnormalize(stem: Path) -> NormalizerStats:
     try:
         meta = json.loads(stem.with_suffix(".json").read_text())
         a = _statistics_arrays(stem)
+        if not meta["norm_obs"]:  # an image observation: the reward's statistics alone
+            return NormalizerStats(np.zeros(0), np.ones(0), 0.0, float(meta["clip_obs"]),
+                                   float(meta["epsilon"]), False)  # fmt: skip
         return NormalizerStats(a["obs_mean"], a["obs_var"], float(a["obs_count"]),
                                float(meta["clip_obs"]), float(meta["epsilon"]),
-                               bool(meta["norm_obs"]))  # fmt: skip
+                               True)  # fmt: skip
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz/.json: {exc}"
         raise ValueError(msg) from exc
@@ -614,17 +619,24 @@ def restore_vecnormalize(venv, stem: Path) -> None:
     stem = Path(stem)
     try:
         arrays = _statistics_arrays(stem)
-        obs_mean, ret_mean = arrays["obs_mean"], arrays["ret_mean"]
-        obs_var, ret_var = arrays["obs_var"], arrays["ret_var"]
-        obs_count, ret_count = float(arrays["obs_count"]), float(arrays["ret_count"])
+        ret_mean, ret_var = arrays["ret_mean"], arrays["ret_var"]
+        ret_count = float(arrays["ret_count"])
+        if venv.norm_obs:
+            obs_mean, obs_var = arrays["obs_mean"], arrays["obs_var"]
+            obs_count = float(arrays["obs_count"])
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz: {exc}"
         raise ValueError(msg) from exc
-    if obs_mean.shape != venv.obs_rms.mean.shape or ret_mean.shape != venv.ret_rms.mean.shape:
-        raise ValueError(f"the VecNormalize statistics {stem}.npz are for observations of "
-                         f"shape {obs_mean.shape}, the env gives {venv.obs_rms.mean.shape}: "
-                         "the agent was trained on another observation")  # fmt: skip
-    venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = obs_mean, obs_var, obs_count
+    if venv.norm_obs:
+        if obs_mean.shape != venv.obs_rms.mean.shape:
+            raise ValueError(f"the VecNormalize statistics {stem}.npz are for observations of "
+                             f"shape {obs_mean.shape}, the env gives "
+                             f"{venv.obs_rms.mean.shape}: the agent was trained on another "
+                             "observation")  # fmt: skip
+        venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = obs_mean, obs_var, obs_count
+    if ret_mean.shape != venv.ret_rms.mean.shape:
+        raise ValueError(f"the VecNormalize statistics {stem}.npz hold a return of shape "
+                         f"{ret_mean.shape}, the env's is {venv.ret_rms.mean.shape}")  # fmt: skip
     venv.ret_rms.mean, venv.ret_rms.var, venv.ret_rms.count = ret_mean, ret_var, ret_count
 
 

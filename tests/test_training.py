@@ -691,6 +691,57 @@ def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) 
             frame_stack({"frame_stack": bad})
 
 
+def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statistics(
+    tmp_path: Path,
+) -> None:
+    """``obs_mode: image`` with ``normalize: true``: VecNormalize normalises the reward
+    only (SB3's CnnPolicy takes the uint8 image and scales it itself; normalised floats
+    fail its image check), the statistics save and load without observation arrays, and
+    the loaded policy acts as the model does on the raw image. Asking to normalise the
+    image is refused before anything is built."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from training.common import make_env, normalize_settings
+    from training.train import train
+
+    image_env = {**SMALL, "obs_mode": "image"}
+    config = {**tiny_config(), "n_timesteps": 64, "policy": "CnnPolicy", "normalize": True,
+              "env_kwargs": image_env,
+              "policy_kwargs": {"net_arch": [16], "features_extractor_kwargs":
+                                {"features_dim": 16}}}  # fmt: skip
+    assert normalize_settings(config, image=True) == {"norm_obs": False, "norm_reward": True}
+    model = train("ppo", config, tmp_path / "cnn", seed=0, progress_bar=False)
+    stats = model.with_name("ppo_vecnormalize")
+    with np.load(stats.with_suffix(".npz")) as d:
+        assert sorted(d.files) == ["ret_count", "ret_mean", "ret_var"]
+    policy = load_policy(model)
+    assert policy.vecnormalize.norm_obs is False
+    env = make_env(image_env, 30)
+    obs, _ = env.reset(seed=2, options={"target": "jog"})
+    policy.reset(2)
+    for _ in range(3):
+        want, _ = policy.model.predict(obs, deterministic=True)
+        got = policy.act(obs)
+        np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
+        obs, *_ = env.step(got)
+    env.close()
+    # the pickle VecNormalize.load reads, and going on from the saved statistics
+    venv = VecNormalize.load(str(stats.with_suffix(".pkl")),
+                             DummyVecEnv([lambda: make_env(image_env, 30)]))  # fmt: skip
+    assert venv.norm_obs is False
+    from policies.sb3 import restore_vecnormalize
+
+    restore_vecnormalize(venv, stats)
+    venv.close()
+    again = train("ppo", config, tmp_path / "cnn_again", seed=0, progress_bar=False,
+                  trained_agent=model)  # fmt: skip
+    assert again.is_file()
+    bad = {**config, "normalize": {"norm_obs": True}}
+    with pytest.raises(ValueError, match="norm_obs=True on an image"):
+        train("ppo", bad, tmp_path / "refused", seed=0, progress_bar=False)
+    assert not (tmp_path / "refused").exists()
+
+
 def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_inference(
     tmp_path: Path,
 ) -> None:

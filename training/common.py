@@ -53,6 +53,7 @@ __all__ = [
     "fresh_dir",
     "held_out_names",
     "held_out_targets",
+    "image_observation",
     "limit_threads",
     "load_config",
     "make_env",
@@ -125,8 +126,10 @@ def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
 
 def check_run_config(config: dict[str, Any]) -> None:
     """Refuse a config whose run cannot start: ``n_timesteps`` and ``n_envs`` positive
-    integers, and an episode cap (``env_kwargs.max_episode_steps``) of at least 1."""
+    integers, an episode cap (``env_kwargs.max_episode_steps``) of at least 1, and no
+    normalised image observation."""
     env_settings(config)  # the episode cap
+    normalize_settings(config, image=image_observation(config))
     _positive_int_setting("n_timesteps", config.get("n_timesteps"))
     _positive_int_setting("n_envs", config.get("n_envs", DEFAULT_N_ENVS))
 
@@ -240,16 +243,31 @@ def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, A
     return out
 
 
-def normalize_settings(config: dict[str, Any]) -> dict[str, Any]:
+def image_observation(config: dict[str, Any]) -> bool:
+    """Whether the config's env gives the image observation (``obs_mode: image``)."""
+    return env_settings(config)[0].get("obs_mode") == "image"
+
+
+def normalize_settings(config: dict[str, Any], image: bool = False) -> dict[str, Any]:
     """VecNormalize kwargs of ``normalize`` (rl-zoo: ``true``, a dict, or a string
-    ``"dict(norm_obs=True, norm_reward=False)"``); {} for none."""
+    ``"dict(norm_obs=True, norm_reward=False)"``); {} for none.
+
+    ``image``: the observation is an image (``obs_mode: image``). Its observation is then
+    not normalised by default (SB3's CnnPolicy scales the uint8 pixels by 1/255 itself and
+    rejects the floats VecNormalize would give it); only the reward is. Asking for
+    ``norm_obs=True`` on an image raises ValueError."""
     from .callbacks import policy_kwargs
 
     value = config.get("normalize")
     if not value:
         return {}
     extra = {} if value is True else policy_kwargs(value)
-    return {"norm_obs": True, "norm_reward": True, **extra}
+    out = {"norm_obs": not image, "norm_reward": True, **extra}
+    if image and out["norm_obs"]:
+        raise ValueError("normalize: norm_obs=True on an image observation: VecNormalize "
+                         "would turn the uint8 image into floats, which SB3's CnnPolicy "
+                         "rejects; drop norm_obs (the policy scales the pixels)")  # fmt: skip
+    return out
 
 
 def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:

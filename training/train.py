@@ -82,6 +82,7 @@ from .common import (
     eval_env_settings,
     eval_settings,
     fresh_dir,
+    image_observation,
     limit_threads,
     load_config,
     make_env,
@@ -206,7 +207,7 @@ def train(
         wrapper_kwargs=residual or None,
     )
     score_mode = venv.get_attr("score_mode", [0])[0]
-    norm = normalize_settings(config)
+    norm = normalize_settings(config, image=image_observation(config))
     if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
     normalizer = venv  # what is saved as the VecNormalize statistics
@@ -392,7 +393,7 @@ def check_acts_alike(saved: dict[str, Any], config: dict[str, Any], new_base_opt
     if frame_stack(saved) != frame_stack(config):
         raise ValueError(f"{name} was trained on a frame stack of {frame_stack(saved)}, "
                          f"the config asks for {frame_stack(config)}")  # fmt: skip
-    if normalised != bool(normalize_settings(config)):
+    if normalised != bool(normalize_settings(config, image=image_observation(config))):
         raise ValueError(f"{name} was trained {'with' if normalised else 'without'} "
                          "VecNormalize statistics (normalize: true) and the config "
                          f"{'does not normalise' if normalised else 'normalises'}")  # fmt: skip
