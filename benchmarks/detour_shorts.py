@@ -32,7 +32,8 @@ the last with ``--policies ungated --agent MODEL.zip`` for unshipped agents, int
 
 writes one JSON line per episode to ``--out`` (default
 ``benchmarks/results/detour_shorts.jsonl``) and prints the mean score and the routes
-shorted (a trace node in a keep-out) per policy. ``--config``: the env of a config's
+shorted (trace in a keep-out: ``short_length`` > 0; a node in one for records made
+before 2026-12-07) per policy. ``--config``: the env of a config's
 ``env_kwargs`` (default ``training/configs/eval.yml``, the model); the second command plays
 the detours of the surrogate the agent was trained on. Each row records the axis the
 route's first leg runs along and, for a shorted episode, the control step and progress
@@ -122,7 +123,8 @@ def episode(job: dict[str, Any]) -> dict[str, Any]:
     return {"seed": job["seed"], "route": str(info["target"]), "policy": job["policy"],
             "config": job.get("config"), "agent": job.get("agent"), "heading": heading,
             "shield": job.get("shield"), "score": float(info["score"]),
-            "shorts": int(info["shorts"]), "steps": steps, "shielded": shielded,
+            "shorts": int(info["shorts"]), "short_length": float(info["short_length"]),
+            "steps": steps, "shielded": shielded,
             "first_short_step": first_short and first_short[0],
             "progress_at_short": first_short and first_short[1]}  # fmt: skip
 
@@ -132,9 +134,18 @@ def short_onset(onset: tuple[int, float] | None, step: int, info: dict) -> tuple
     updated after ``step``. ``info["shorts"]`` counts the unfrozen tail too, so a touch that
     the tail lifts off again is forgotten: only a short that lasts to the end has an onset
     (before 2026-12-06 the first touch was kept, e.g. seed 6189 in plus_z_detours.jsonl)."""
-    if info["shorts"] == 0:
+    if not shorted(info):
         return None
     return onset if onset is not None else (step, float(info["progress"]))
+
+
+def shorted(record: dict[str, Any]) -> bool:
+    """Whether an episode's record (or info) has trace in a keep-out: by its length in
+    keep-outs (``short_length``, the score's measure since 2026-12-07), or by the nodes in
+    them for records made before (a thin keep-out can be stepped over by the nodes)."""
+    if "short_length" in record:
+        return record["short_length"] > 0.0
+    return record["shorts"] > 0
 
 
 def first_heading(waypoints: np.ndarray) -> str:
@@ -153,14 +164,14 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
     lines = []
     for p in dict.fromkeys(r["policy"] for r in rows):
         rs = [r for r in rows if r["policy"] == p]
-        shorted = [r["seed"] for r in rs if r["shorts"] > 0]
+        hit = [r["seed"] for r in rs if shorted(r)]
         lines.append(f"{p}: mean {statistics.fmean(r['score'] for r in rs):.3f} over "
-                     f"{len(rs)} routes, {len(shorted)} shorted {shorted}")  # fmt: skip
+                     f"{len(rs)} routes, {len(hit)} shorted {hit}")  # fmt: skip
         for h in AXES:
             hs = [r for r in rs if r.get("heading") == h]
             if hs:
                 at = [(r["seed"], r["first_short_step"], round(r["progress_at_short"], 2))
-                      for r in hs if r["shorts"] > 0]  # fmt: skip
+                      for r in hs if shorted(r)]  # fmt: skip
                 lines.append(f"  first leg {h}: mean {statistics.fmean(r['score'] for r in hs):.3f}"
                              f" over {len(hs)}; shorted (seed, step, progress): {at}")  # fmt: skip
     return lines

@@ -73,3 +73,15 @@ def test_short_onset_is_where_the_final_run_of_shorts_began() -> None:
         if step == 3:  # the tail lifted off again: no short so far
             assert onset is None
     assert onset == (5, 0.5)
+
+
+def test_a_short_is_trace_in_a_keepout_by_length_and_by_nodes_in_older_records() -> None:
+    """A thin keep-out stepped over by the nodes (no node inside) is a short by length; a
+    record made before short_length existed is judged by its nodes."""
+    assert detour_shorts.shorted({"shorts": 0, "short_length": 0.42})
+    assert not detour_shorts.shorted({"shorts": 0, "short_length": 0.0})
+    assert detour_shorts.shorted({"shorts": 3})
+    assert not detour_shorts.shorted({"shorts": 0})
+    onset = detour_shorts.short_onset(None, 4, {"shorts": 0, "short_length": 0.3,
+                                                "progress": 0.5})  # fmt: skip
+    assert onset == (4, 0.5)
