@@ -708,9 +708,14 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
     config = {**tiny_config(), "n_timesteps": 64, "policy": "CnnPolicy", "normalize": True,
               "env_kwargs": image_env,
               "policy_kwargs": {"net_arch": [16], "features_extractor_kwargs":
-                                {"features_dim": 16}}}  # fmt: skip
+                                {"features_dim": 16}},
+              "callback": [{"training.callbacks.HeldOutEval": {  # syncs the statistics
+                  "eval_targets": ["u_turn"], "eval_freq": 32, "n_eval_episodes": 1}}]}  # fmt: skip
     assert normalize_settings(config, image=True) == {"norm_obs": False, "norm_reward": True}
     model = train("ppo", config, tmp_path / "cnn", seed=0, progress_bar=False)
+    assert (tmp_path / "cnn" / "evaluations.npz").is_file()
+    best = load_policy(tmp_path / "cnn" / "best_model.zip", algo="ppo")
+    assert best.vecnormalize.norm_obs is False
     stats = model.with_name("ppo_vecnormalize")
     with np.load(stats.with_suffix(".npz")) as d:
         assert sorted(d.files) == ["ret_count", "ret_mean", "ret_var"]

@@ -178,6 +178,7 @@ def train(
         SubprocVecEnv,
         VecFrameStack,
         VecNormalize,
+        VecTransposeImage,
     )
 
     algo = algo.lower()
@@ -259,6 +260,8 @@ def train(
                                     norm_obs=bool(norm["norm_obs"]))  # fmt: skip
         if n_stack > 1:
             eval_env = VecFrameStack(eval_env, n_stack)
+        if image_observation(config):  # as SB3 wraps the training env for its CNN: the
+            eval_env = VecTransposeImage(eval_env)  # chains must match to sync statistics
         callbacks.append(
             EvalCallback(
                 eval_env,
