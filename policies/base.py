@@ -22,6 +22,7 @@ __all__ = [
     "action_from_flow",
     "option_defaults",
     "policy_options",
+    "require_vector_observation",
 ]
 
 
@@ -31,6 +32,16 @@ def option_defaults(cls: type, exclude: tuple[str, ...]) -> dict[str, Any]:
     params = inspect.signature(cls.__init__).parameters.values()
     return {p.name: p.default for p in params
             if p.default is not p.empty and p.name not in exclude}  # fmt: skip
+
+
+def require_vector_observation(env: Any, who: str) -> None:
+    """ValueError unless the (unwrapped) ``env`` gives the vector observation: ``who``
+    reads the trace, the route ahead and the keep-out from its slices, which an image
+    does not have (it would read pixels as positions)."""
+    if getattr(env, "obs_mode", "vector") != "vector":
+        raise ValueError(f"{who} reads the vector observation, but the env gives "
+                         f"obs_mode={env.obs_mode!r}: use obs_mode='vector' (a residual "
+                         "agent's base, cnt-evaluate's scripted baseline)")  # fmt: skip
 
 
 def policy_options(policy: Any) -> dict[str, Any]:

@@ -175,7 +175,7 @@ from cnt_env.task.geometry import inside_polygon, nearest_on_boundary, outward_n
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
 
-from .base import option_defaults
+from .base import option_defaults, require_vector_observation
 from .scripted import amplitude_curve
 
 __all__ = ["RouteFollower"]
@@ -276,6 +276,7 @@ class RouteFollower:
     @classmethod
     def from_env(cls, env, **kwargs) -> RouteFollower:
         base = env.unwrapped
+        require_vector_observation(base, "the route follower")
         follower = cls(base.observation_slices, base.vbar_max, spacing=base.target_spacing,
                        **kwargs)  # fmt: skip
         follower._env = base

@@ -28,7 +28,7 @@ import numpy as np
 
 from cnt_env.task.spaces import action_from_flow
 
-from .base import option_defaults
+from .base import option_defaults, require_vector_observation
 
 __all__ = ["CURVE_RESOURCE", "ScriptedPolicy", "amplitude_curve", "amplitude_curve_from_csv"]
 
@@ -97,6 +97,7 @@ class ScriptedPolicy:
     @classmethod
     def from_env(cls, env, **kwargs) -> ScriptedPolicy:
         base = env.unwrapped
+        require_vector_observation(base, "the scripted policy")
         return cls(base.observation_slices["target"], base.vbar_max, **kwargs)
 
     def reset(self, seed: int | None = None) -> None:

@@ -17,6 +17,7 @@ from policies import (
     ConstantPolicy,
     Policy,
     RandomPolicy,
+    RouteFollower,
     ScriptedPolicy,
     action_from_flow,
     load_policy,
@@ -583,3 +584,30 @@ def test_algorithm_comes_from_the_name_else_the_config_beside_the_model(tmp_path
     (tmp_path / "best_model.yml").write_text("run: [unclosed\n")  # corrupt: the same error
     with pytest.raises(ValueError, match="pass the algorithm"):
         algo_of(tmp_path / "best_model.zip")
+
+
+@pytest.mark.parametrize("score", ["corridor", "thin"])
+def test_the_baselines_that_read_the_vector_observation_refuse_an_image(score: str) -> None:
+    """The follower and the scripted policy index the vector observation's slices; on the
+    image they would read pixels as positions, so they refuse it and say what to do."""
+    env = gymnasium.make("CNTDeposit-v0", **small(score=score), obs_mode="image")
+    cls = RouteFollower if score == "corridor" else ScriptedPolicy
+    with pytest.raises(ValueError, match="obs_mode='vector'"):
+        cls.from_env(env)
+    cls.from_env(gymnasium.make("CNTDeposit-v0", **small(score=score)))  # the vector: fine
+
+
+def test_an_ensemble_must_observe_one_way(tmp_path) -> None:
+    from training.evaluate import observation_settings
+
+    paths = []
+    for name, extra in (("a", {}), ("b", {"obs_mode": "image"})):
+        (tmp_path / f"{name}.yml").write_text(
+            f"CNTDeposit-v0:\n  env_kwargs: {extra or {'pattern_every': 0}}\n"
+        )
+        paths.append(tmp_path / f"{name}.zip")
+    assert observation_settings(paths[:1]) == {}
+    assert observation_settings(paths[1:]) == {"obs_mode": "image"}
+    assert observation_settings([tmp_path / "none.zip"]) == {}  # no config beside it
+    with pytest.raises(ValueError, match="observe differently"):
+        observation_settings(paths)

@@ -741,9 +741,21 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
     again = train("ppo", config, tmp_path / "cnn_again", seed=0, progress_bar=False,
                   trained_agent=model)  # fmt: skip
     assert again.is_file()
+    # evaluated beside a vector baseline on the vector env's config: the model observes
+    # the image it was trained on (its own config), the follower the vector
+    from training.evaluate import evaluate
+
+    vector = tiny_config()  # the config beside the model (ppo.yml) says obs_mode: image
+    table = evaluate(["scripted", "cnn"], ["u_turn"], [0], vector, tmp_path / "eval",
+                     jobs=1, models=tmp_path / "empty", model_paths={"cnn": model})  # fmt: skip
+    assert {r["policy"] for r in table} >= {"scripted", "cnn"}
     bad = {**config, "normalize": {"norm_obs": True}}
     with pytest.raises(ValueError, match="norm_obs=True on an image"):
         train("ppo", bad, tmp_path / "refused", seed=0, progress_bar=False)
+    residual = {**config, "normalize": True, "env_wrapper": [
+        {"training.common.ResidualAction": {"base": "scripted", "scale": 0.5}}]}  # fmt: skip
+    with pytest.raises(ValueError, match="residual agent"):
+        train("ppo", residual, tmp_path / "refused", seed=0, progress_bar=False)
     assert not (tmp_path / "refused").exists()
 
 

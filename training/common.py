@@ -30,6 +30,7 @@ from policies.residual import (
     make_base_policy,
     observe,
     observed_space,
+    residual_settings,
     zoo_entry,
     zoo_names,
 )
@@ -127,9 +128,14 @@ def load_config(path: str | Path, env_id: str = ENV_ID) -> dict[str, Any]:
 def check_run_config(config: dict[str, Any]) -> None:
     """Refuse a config whose run cannot start: ``n_timesteps`` and ``n_envs`` positive
     integers, an episode cap (``env_kwargs.max_episode_steps``) of at least 1, and no
-    normalised image observation."""
+    normalised image observation nor residual agent on the image."""
     env_settings(config)  # the episode cap
-    normalize_settings(config, image=image_observation(config))
+    image = image_observation(config)
+    normalize_settings(config, image=image)
+    if image and residual_settings(config) is not None:
+        raise ValueError("a residual agent (env_wrapper ResidualAction) acts over the route "
+                         "follower, which reads the vector observation: drop obs_mode: "
+                         "image, or train a plain agent on the image")  # fmt: skip
     _positive_int_setting("n_timesteps", config.get("n_timesteps"))
     _positive_int_setting("n_envs", config.get("n_envs", DEFAULT_N_ENVS))
 

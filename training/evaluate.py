@@ -116,6 +116,31 @@ PRETRAINED = Path(__file__).resolve().parents[1] / "policies" / "pretrained"
 COLORS = {"random": "0.6", "constant": "tab:orange", "scripted": "tab:green",
           "ppo": "tab:blue", "sac": "tab:purple", "ppo_residual": "tab:cyan",
           "ppo_long": "tab:red"}  # fmt: skip
+#: The env's keywords that set only what a policy observes (not the physics, the task or
+#: the score): a trained model is evaluated with its own, from the config beside it, so
+#: that an image agent and the vector baselines play the same episodes.
+OBSERVATION_KEYS = (
+    "obs_mode", "image_size", "image_extent", "image_layers",
+    "n_trace_points", "n_target_points", "trace_window", "target_spacing",
+)  # fmt: skip
+
+
+def observation_settings(models: Sequence[Path]) -> dict[str, Any]:
+    """The observation keywords (``OBSERVATION_KEYS``) the models were trained with, from
+    the configs beside them (``<name>.yml``; none for a model without one). ValueError if
+    the members of an ensemble observe differently."""
+    from policies.sb3 import model_config
+
+    seen = []
+    for m in models:
+        cfg = model_config(Path(m))
+        entry = cfg.get(ENV_ID) if isinstance(cfg, dict) else None
+        kw = env_settings(entry)[0] if isinstance(entry, dict) else {}
+        seen.append({k: kw[k] for k in OBSERVATION_KEYS if k in kw})
+    if any(o != seen[0] for o in seen[1:]):
+        raise ValueError(f"the models {[str(m) for m in models]} observe differently "
+                         f"({seen}): an ensemble needs one observation")  # fmt: skip
+    return seen[0] if seen else {}
 
 
 # ---- one episode (runs in a worker process) ---------------------------------------------
@@ -739,6 +764,9 @@ def evaluate(
                                                 "train one with cnt-train")  # fmt: skip
                     check_model(model, trust=trust)  # refuses before any worker starts
                     members.append(model)
+            observed = observation_settings(members) if trained else {}
+            if any(env_kwargs.get(k) != v for k, v in observed.items()):
+                print(f"{p}: observed as it was trained, {observed}")
             for t in targets:
                 spec = {"kind": p}
                 if p == "constant":
@@ -751,7 +779,7 @@ def evaluate(
                     job_list.append({
                         "policy": p, "spec": spec, "target": t, "seed": int(s),
                         "route": custom[t].to_dict() if t in custom else None,
-                        "env_kwargs": env_kwargs, "max_steps": max_steps,
+                        "env_kwargs": {**env_kwargs, **observed}, "max_steps": max_steps,
                         "save_dir": str(save_episodes) if save_episodes else None,
                     })  # fmt: skip
         results = _mapped(pool, run_episode, job_list, "episodes")
