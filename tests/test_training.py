@@ -78,7 +78,7 @@ def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
     assert {"score_mean", "score_std", "coverage_mean", "normalized_score"} <= set(rows[0])
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert set(summary) == {"policies", "targets", "seeds", "custom_routes", "env_kwargs",
-                            "max_episode_steps", "models"}  # fmt: skip
+                            "max_episode_steps", "models", "model_sha256"}  # fmt: skip
     assert summary["custom_routes"] == {}
     # what the episodes ran on: the config's physics (here the surrogate) and models
     assert summary["env_kwargs"]["drag_law"] == config["env_kwargs"]["drag_law"] == "printed"
@@ -392,6 +392,43 @@ def test_evaluate_reuses_episodes_and_redoes_a_changed_baseline(tmp_path: Path) 
     assert wall(tmp_path / "kept") == {"random": -1.0, "scripted": -1.0}
     redone = wall(tmp_path / "redone", redo=["scripted"])
     assert redone["random"] == -1.0 and redone["scripted"] >= 0.0
+
+
+def test_reuse_takes_a_trained_policys_episodes_only_from_the_same_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """summary.json records each trained policy's model sha256; --reuse takes a trained
+    policy's episodes only where the recorded model is the one given now (the same name
+    may be another model), and says so where an older run recorded none."""
+    from training.common import load_config
+    from training.evaluate import evaluate
+
+    config = load_config(PRETRAINED_DIR / "ppo.yml")
+    config["env_kwargs"]["max_episode_steps"] = 2
+    first = tmp_path / "first"
+
+    def run(out: Path, model: str, **kw) -> float:
+        evaluate(["agent"], ["u_turn"], [0], config, out, jobs=1, models=tmp_path / "none",
+                 model_paths={"agent": PRETRAINED_DIR / model}, **kw)  # fmt: skip
+        with (out / "episodes.csv").open() as fh:
+            return float(next(csv.DictReader(fh))["wall_s"])
+
+    run(first, "ppo.zip")
+    summary = json.loads((first / "summary.json").read_text())
+    from policies.sb3 import file_sha256
+
+    assert summary["model_sha256"] == {"agent": [file_sha256(PRETRAINED_DIR / "ppo.zip")]}
+    saved = json.loads((first / "episodes.json").read_text())
+    (first / "episodes.json").write_text(json.dumps([{**r, "wall_s": -1.0} for r in saved]))
+    assert run(tmp_path / "same", "ppo.zip", reuse=[first]) == -1.0  # reused
+    assert run(tmp_path / "other", "sac.zip", reuse=[first]) >= 0.0  # played again
+    assert "not reused from" in capsys.readouterr().out
+    del summary["model_sha256"]  # a run made before the hashes were recorded
+    (first / "summary.json").write_text(json.dumps(summary))
+    assert run(tmp_path / "legacy", "sac.zip", reuse=[first]) == -1.0
+    assert "records no sha256" in capsys.readouterr().out
+    legacy = json.loads((tmp_path / "legacy" / "summary.json").read_text())
+    assert legacy["model_sha256"] == {}  # not certified by this run
 
 
 def test_evaluate_into_a_used_out_names_the_files_it_kept(

@@ -22,8 +22,11 @@ writes, in ``--out``:
   per seed, the mean over targets, then mean ± std over seeds;
 * ``results.md``: the same as Markdown tables (for the README);
 * ``summary.json``: ``{"policies": {name: {"score_mean", "score_std"}}, "targets",
-  "seeds", "custom_routes"}`` (the ``ALL`` rows; the routes evaluated from
-  ``--route-file``, in the dict format);
+  "seeds", "custom_routes", "env_kwargs", "max_episode_steps", "models",
+  "model_sha256"}`` (the ``ALL`` rows; the routes evaluated from ``--route-file``, in the
+  dict format; the physics, the trained models and their files' sha256, which
+  ``--reuse`` checks: a trained policy's episodes are reused only from a run of the same
+  model file);
 * ``constant_grid.csv`` and ``constant_best.json``: the constant-flow grid search
   (policies/constant.py), unless ``--constant-from`` gives a previous ``constant_best.json``;
 * ``traces_<target>.png`` (and ``traces.png``, all targets): the trace laid by each
@@ -141,6 +144,26 @@ def observation_settings(models: Sequence[Path]) -> dict[str, Any]:
         raise ValueError(f"the models {[str(m) for m in models]} observe differently "
                          f"({seen}): an ensemble needs one observation")  # fmt: skip
     return seen[0] if seen else {}
+
+
+def model_hashes(policy: str, models: Path | Sequence[Path],
+                 model_paths: Mapping[str, Path] | None = None) -> list[str] | None:  # fmt: skip
+    """The sha256 of each model file of a trained ``policy`` (its ensemble members), None
+    where one is missing (a reused policy need not have its model here)."""
+    from policies.sb3 import file_sha256
+
+    paths = [Path((model_paths or {}).get(n) or model_file(n, models))
+             for n in ensemble_members(policy)]  # fmt: skip
+    return [file_sha256(q) for q in paths] if all(q.is_file() for q in paths) else None
+
+
+def _recorded_hashes(path: Path) -> dict[str, list[str]]:
+    """The model sha256s a results directory's ``summary.json`` records ({} before they
+    were recorded, 2026-12-07)."""
+    summary = path / "summary.json"
+    if not summary.is_file():
+        return {}
+    return dict(json.loads(summary.read_text()).get("model_sha256") or {})
 
 
 # ---- one episode (runs in a worker process) ---------------------------------------------
@@ -726,12 +749,26 @@ def evaluate(
     if (rrd is not None or video is not None) and save_episodes is None:
         tmp = tempfile.TemporaryDirectory()
         save_episodes = Path(tmp.name)
-    # --reuse: each directory read once; the first holding an episode wins
+    # --reuse: each directory read once; the first holding an episode wins. A trained
+    # policy's episodes are the same model's only where that run recorded its sha256.
+    hashes = {p: model_hashes(p, models, model_paths) for p in policies if p not in BASELINES}
     wanted = {(p, t, int(s)) for p in policies for t in targets for s in seeds}
     old: dict[tuple[str, str, int], dict[str, Any]] = {}
+    unverified: set[str] = set()  # reused from a run that recorded no sha256 for it
     for d in reuse:
-        for r in _load_results(Path(d), wanted, custom):
+        theirs = _recorded_hashes(Path(d))
+        other = {p for p, h in hashes.items() if p in theirs and h is not None and theirs[p] != h}
+        for p in sorted(other):
+            print(f"{p}: not reused from {d}, whose {p} was another model")
+        loaded = _load_results(Path(d), {w for w in wanted if w[0] not in other}, custom)
+        for r in loaded:
             old.setdefault(_episode_key(r["row"]), r)
+        for p in sorted({r["row"]["policy"] for r in loaded} & set(hashes) - set(theirs)
+                        - set(redo)):  # fmt: skip
+            print(f"{p}: {d} records no sha256 of its model (results made before "
+                  f"2026-12-07), so its episodes are taken as this model's: pass --redo "
+                  f"{p} if it is another")  # fmt: skip
+            unverified.add(p)
     reused = {p for p in policies if p not in redo
               and all((p, t, int(s)) in old for t in targets for s in seeds)}  # fmt: skip
     if reused:
@@ -804,6 +841,9 @@ def evaluate(
         "max_episode_steps": max_steps,
         "models": {p: (SPLIT if SPLIT in p else "+").join(map(shown_path, spec["models"]))
                    for p, spec in specs.items() if "models" in spec},
+        # the model files' sha256 (one per ensemble member), for --reuse to check
+        "model_sha256": {p: h for p, h in hashes.items()
+                         if h is not None and not (p in reused and p in unverified)},
     }  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "results.md").write_text(markdown_tables(table))
