@@ -786,6 +786,9 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
     table = evaluate(["scripted", "cnn"], ["u_turn"], [0], vector, tmp_path / "eval",
                      jobs=1, models=tmp_path / "empty", model_paths={"cnn": model})  # fmt: skip
     assert {r["policy"] for r in table} >= {"scripted", "cnn"}
+    from training.evaluate import eval_set_baselines  # the learning curve's baselines
+
+    assert set(eval_set_baselines(tmp_path / "cnn")) == {"scripted", "random"}
     bad = {**config, "normalize": {"norm_obs": True}}
     with pytest.raises(ValueError, match="norm_obs=True on an image"):
         train("ppo", bad, tmp_path / "refused", seed=0, progress_bar=False)

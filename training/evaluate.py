@@ -570,6 +570,8 @@ def eval_set_baselines(run: Path, policies: Sequence[str] = ("scripted", "random
         except (ValueError, KeyError, TypeError):
             pass  # rebuilt below
     env_kwargs, max_steps = eval_env_settings(cfg)
+    # the baselines observe the vector: an image run's routes and physics, not its image
+    env_kwargs = {k: v for k, v in env_kwargs.items() if k not in OBSERVATION_KEYS}
     scores = {}
     for p in policies:
         env = HeldOutCycle(make_env(env_kwargs, max_steps), targets)
