@@ -152,8 +152,7 @@ def model_hashes(policy: str, models: Path | Sequence[Path],
     where one is missing (a reused policy need not have its model here)."""
     from policies.sb3 import file_sha256
 
-    paths = [Path((model_paths or {}).get(n) or model_file(n, models))
-             for n in ensemble_members(policy)]  # fmt: skip
+    paths = [model_file(n, models, model_paths) for n in ensemble_members(policy)]
     return [file_sha256(q) for q in paths] if all(q.is_file() for q in paths) else None
 
 
@@ -191,9 +190,13 @@ def _make_policy(spec: dict[str, Any], env):
     return MeanPolicy(agents, name=kind)
 
 
-def model_file(name: str, models: Path | Sequence[Path]) -> Path:
-    """``<dir>/<name>.zip`` in the first of the ``models`` directories that holds it (the
-    first directory's path when none does, for the error)."""
+def model_file(name: str, models: Path | Sequence[Path],
+               model_paths: Mapping[str, Path] | None = None) -> Path:  # fmt: skip
+    """``model_paths[name]`` if given, else ``<dir>/<name>.zip`` in the first of the
+    ``models`` directories that holds it (the first directory's path when none does, for
+    the error)."""
+    if (model_paths or {}).get(name):
+        return Path(model_paths[name])
     dirs = [Path(models)] if isinstance(models, (str, Path)) else [Path(d) for d in models]
     paths = [d / f"{name}.zip" for d in dirs]
     return next((q for q in paths if q.is_file()), paths[0])
@@ -797,7 +800,7 @@ def evaluate(
                 from policies.sb3 import check_model
 
                 for name in ensemble_members(p):
-                    model = Path((model_paths or {}).get(name) or model_file(name, models))
+                    model = model_file(name, models, model_paths)
                     if not model.is_file():
                         raise FileNotFoundError(f"no {name} model at {model} (--models); "
                                                 "train one with cnt-train")  # fmt: skip

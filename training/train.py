@@ -208,7 +208,8 @@ def train(
         wrapper_kwargs=residual or None,
     )
     score_mode = venv.get_attr("score_mode", [0])[0]
-    norm = normalize_settings(config, image=image_observation(config))
+    image = image_observation(config)
+    norm = normalize_settings(config, image=image)
     if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
     normalizer = venv  # what is saved as the VecNormalize statistics
@@ -260,7 +261,7 @@ def train(
                                     norm_obs=bool(norm["norm_obs"]))  # fmt: skip
         if n_stack > 1:
             eval_env = VecFrameStack(eval_env, n_stack)
-        if image_observation(config):  # as SB3 wraps the training env for its CNN: the
+        if image:  # as SB3 wraps the training env for its CNN: the
             eval_env = VecTransposeImage(eval_env)  # chains must match to sync statistics
         callbacks.append(
             EvalCallback(
