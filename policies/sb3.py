@@ -209,6 +209,33 @@ def _box(item: dict[str, Any]):
     return spaces.Box(low=low, high=high, shape=shape, dtype=dtype)
 
 
+#: One Box of a Dict space's text: ``'key': Box(low, high, (shape), dtype)`` (numpy
+#: prints an array bound without commas; a bound that is one value is printed as it).
+_DICT_BOX = re.compile(r"'(\w+)': Box\(([^,()]+), ([^,()]+), \(([\d, ]*)\), (\w+)\)")
+
+
+def _space(item: dict[str, Any]):
+    """A Box, or a Dict of Boxes (``obs_mode="dict"``) from the text of its spaces."""
+    from gymnasium import spaces
+
+    if item.get(":type:") != "<class 'gymnasium.spaces.dict.Dict'>":
+        return _box(item)
+    text = str(item.get("spaces", ""))
+    entries = _DICT_BOX.findall(text)
+    if not entries or _DICT_BOX.sub("", text) != "{" + ", " * (len(entries) - 1) + "}":
+        raise UntrustedModelError(f"cannot read a Dict of Boxes from {text[:60]!r}")
+    boxes = {}
+    for key, low, high, shape_text, dtype_text in entries:
+        shape = tuple(int(n) for n in shape_text.replace(",", " ").split())
+        dtype = np.dtype(dtype_text)
+        if dtype.kind not in "fiu":
+            raise UntrustedModelError(f"a Box of dtype {dtype}")
+        bounds = [np.full(shape, _bound(b, (1,), dtype)[0], dtype=dtype) if "[" not in b
+                  else _bound(b, shape, dtype) for b in (low, high)]  # fmt: skip
+        boxes[key] = spaces.Box(low=bounds[0], high=bounds[1], shape=shape, dtype=dtype)
+    return spaces.Dict(boxes)
+
+
 def _schedule_value(item: dict[str, Any], default: float) -> float:
     m = re.fullmatch(r"ConstantSchedule\(val=([-+0-9.eE]+)\)", str(item.get("value_schedule")))
     return float(m.group(1)) if m else default
@@ -224,7 +251,7 @@ def _train_freq(item: dict[str, Any]):
 #: spaces; the others are training state, replaced by neutral values).
 _REBUILD = {
     "policy_class": _policy_class,
-    "observation_space": lambda item, algo: _box(item),
+    "observation_space": lambda item, algo: _space(item),
     "action_space": lambda item, algo: _box(item),
     "lr_schedule": lambda item, algo: _schedule_value(item, 0.0),
     "learning_rate": lambda item, algo: 0.0,
@@ -330,6 +357,15 @@ class SB3Policy:
             self.gate = HeadingGate(keepout_headings, base.slices, getattr(base, "_env", None))
         elif keepout_headings:
             raise ValueError("keepout_headings needs a residual agent (its base reads the env)")
+        from gymnasium import spaces
+
+        #: a Dict observation (``obs_mode="dict"``): its parts pass to the model as they are
+        self.multi_input = isinstance(getattr(model, "observation_space", None), spaces.Dict)
+        if self.multi_input and (base is not None or self.frame_stack > 1 or observe_base
+                                 or mirror is not None):  # fmt: skip
+            msg = ("a model of a Dict observation (obs_mode dict) acts alone: no residual "
+                   "base, frame_stack, observe_base or mirror_average")  # fmt: skip
+            raise ValueError(msg)
 
     def reset(self, seed: int | None = None) -> None:
         self._stacks = {}
@@ -345,6 +381,8 @@ class SB3Policy:
         ``keepout_headings`` the route's heading is read off the observation after it)."""
         if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
+        if self.multi_input:
+            return self._model_action(obs, mirrored=False)
         b = self.base.act(obs) if self.base is not None else None
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
         a = self._model_action(o, mirrored=False)
@@ -358,10 +396,11 @@ class SB3Policy:
             return combine(b, a, self.scale)
         return a
 
-    def _model_action(self, o: np.ndarray, mirrored: bool) -> np.ndarray:
-        """The model's deterministic action for the raw observation ``o`` (d,), through
-        its normalisation and its frame stack (one per view)."""
-        o = o[None]
+    def _model_action(self, o: np.ndarray | dict[str, np.ndarray],
+                      mirrored: bool) -> np.ndarray:  # fmt: skip
+        """The model's deterministic action for the raw observation ``o`` ((d,), or a dict
+        of its parts), through its normalisation and its frame stack (one per view)."""
+        o = {k: np.asarray(v)[None] for k, v in o.items()} if isinstance(o, dict) else o[None]
         if self.vecnormalize is not None:
             o = self.vecnormalize.normalize_obs(o)
         if self.frame_stack > 1:
@@ -535,7 +574,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
     mirror_of = None
     if mirror:
         layout = getattr(getattr(env, "unwrapped", None), "layout", None)
-        if layout is None or getattr(env.unwrapped, "obs_mode", None) == "image":
+        if layout is None or getattr(env.unwrapped, "obs_mode", None) != "vector":
             raise ValueError(
                 "mirror_average needs env=, a CNTDeposit-v0 with the vector "
                 "observation (its layout gives the mirror image)"
@@ -551,38 +590,66 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
 
 class NormalizerStats:
     """The observation normalisation of a saved VecNormalize, without a venv or pickle:
-    ``normalize_obs`` as VecNormalize's (clip((obs - mean) / sqrt(var + eps)))."""
+    ``normalize_obs`` as VecNormalize's (clip((obs - mean) / sqrt(var + eps))). A Dict
+    observation (``obs_mode="dict"``) has one set of statistics per normalised key
+    (``norm_obs_keys``; the image is not normalised): ``obs_rms`` is then a dict."""
 
-    def __init__(self, mean: np.ndarray, var: np.ndarray, count: float, clip_obs: float,
-                 epsilon: float, norm_obs: bool) -> None:  # fmt: skip
+    def __init__(self, stats: dict[str | None, tuple[np.ndarray, np.ndarray, float]],
+                 clip_obs: float, epsilon: float, norm_obs: bool) -> None:  # fmt: skip
+        """``stats``: key -> (mean, var, count); the key None for a Box observation."""
         from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-        self.obs_rms = RunningMeanStd(shape=mean.shape)
-        self.obs_rms.mean, self.obs_rms.var, self.obs_rms.count = mean, var, count
+        rms = {}
+        for key, (mean, var, count) in stats.items():
+            rms[key] = RunningMeanStd(shape=mean.shape)
+            rms[key].mean, rms[key].var, rms[key].count = mean, var, count
+        # one RunningMeanStd for a Box (an empty one when not normalised), a dict for a Dict
+        self.obs_rms: Any = rms if rms and None not in rms else rms.get(None, RunningMeanStd((0,)))
         self.clip_obs, self.epsilon, self.norm_obs = clip_obs, epsilon, norm_obs
         self.training = False
 
-    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+    def _normalize(self, obs: np.ndarray, rms) -> np.ndarray:
+        o = (obs - rms.mean) / np.sqrt(rms.var + self.epsilon)
+        return np.clip(o, -self.clip_obs, self.clip_obs).astype(np.float32)
+
+    def normalize_obs(self, obs: np.ndarray | dict[str, np.ndarray]):
         if not self.norm_obs:
             return obs
-        o = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
-        return np.clip(o, -self.clip_obs, self.clip_obs).astype(np.float32)
+        if isinstance(self.obs_rms, dict):
+            return {k: self._normalize(o, self.obs_rms[k]) if k in self.obs_rms else o
+                    for k, o in obs.items()}  # fmt: skip
+        return self._normalize(obs, self.obs_rms)
+
+
+def _obs_statistics(venv) -> dict[str, Any]:
+    """A VecNormalize's observation statistics by key (None for a Box observation)."""
+    if not venv.norm_obs:  # VecNormalize keeps no observation statistics without norm_obs
+        return {}
+    return dict(venv.obs_rms) if isinstance(venv.obs_rms, dict) else {None: venv.obs_rms}
+
+
+def _suffix(key: str | None) -> str:
+    return "" if key is None else f".{key}"  # npz names: obs_mean, or obs_mean.<key>
 
 
 def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
-    """Write ``<stem>.npz`` (obs and return running statistics) and ``<stem>.json``
-    (settings) for the VecNormalize ``venv``."""
+    """Write ``<stem>.npz`` (obs and return running statistics; per key, ``obs_mean.<key>``,
+    for a Dict observation) and ``<stem>.json`` (settings) for the VecNormalize ``venv``."""
     stem = Path(stem)
     arrays = {"ret_mean": venv.ret_rms.mean, "ret_var": venv.ret_rms.var,
               "ret_count": np.array(venv.ret_rms.count)}  # fmt: skip
-    if venv.norm_obs:  # VecNormalize keeps no observation statistics without norm_obs
-        arrays |= {"obs_mean": venv.obs_rms.mean, "obs_var": venv.obs_rms.var,
-                   "obs_count": np.array(venv.obs_rms.count)}  # fmt: skip
+    stats = _obs_statistics(venv)
+    for key, rms in stats.items():
+        x = _suffix(key)
+        arrays |= {f"obs_mean{x}": rms.mean, f"obs_var{x}": rms.var,
+                   f"obs_count{x}": np.array(rms.count)}  # fmt: skip
     npz = stem.with_suffix(".npz")
     np.savez(npz, **arrays)
     meta = {"clip_obs": venv.clip_obs, "clip_reward": venv.clip_reward, "gamma": venv.gamma,
             "epsilon": venv.epsilon, "norm_obs": venv.norm_obs, "norm_reward": venv.norm_reward,
             "format": "cnt_env vecnormalize 1"}  # fmt: skip
+    if stats and None not in stats:
+        meta["norm_obs_keys"] = sorted(stats)
     js = stem.with_suffix(".json")
     js.write_text(json.dumps(meta, indent=2) + "\n")
     return npz, js
@@ -595,18 +662,24 @@ def _statistics_arrays(stem: Path) -> dict[str, np.ndarray]:
         return {k: np.asarray(d[k], dtype=np.float64) for k in d.files}
 
 
+def _saved_obs_statistics(meta: dict[str, Any], arrays: dict[str, np.ndarray]
+                          ) -> dict[str | None, tuple[np.ndarray, np.ndarray, float]]:  # fmt: skip
+    """key -> (mean, var, count) of a saved normaliser (none without ``norm_obs``)."""
+    if not meta["norm_obs"]:  # an image observation: the reward's statistics alone
+        return {}
+    keys = [str(k) for k in meta["norm_obs_keys"]] if "norm_obs_keys" in meta else [None]
+    return {k: (arrays[f"obs_mean{_suffix(k)}"], arrays[f"obs_var{_suffix(k)}"],
+                float(arrays[f"obs_count{_suffix(k)}"])) for k in keys}  # fmt: skip
+
+
 def load_vecnormalize(stem: Path) -> NormalizerStats:
     """The statistics written by :func:`save_vecnormalize` (for inference)."""
     stem = Path(stem)
     try:
         meta = json.loads(stem.with_suffix(".json").read_text())
-        a = _statistics_arrays(stem)
-        if not meta["norm_obs"]:  # an image observation: the reward's statistics alone
-            return NormalizerStats(np.zeros(0), np.ones(0), 0.0, float(meta["clip_obs"]),
-                                   float(meta["epsilon"]), False)  # fmt: skip
-        return NormalizerStats(a["obs_mean"], a["obs_var"], float(a["obs_count"]),
-                               float(meta["clip_obs"]), float(meta["epsilon"]),
-                               True)  # fmt: skip
+        stats = _saved_obs_statistics(meta, _statistics_arrays(stem))
+        return NormalizerStats(stats, float(meta["clip_obs"]), float(meta["epsilon"]),
+                               bool(meta["norm_obs"]))  # fmt: skip
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz/.json: {exc}"
         raise ValueError(msg) from exc
@@ -617,23 +690,26 @@ def restore_vecnormalize(venv, stem: Path) -> None:
     them) to those written by :func:`save_vecnormalize` at ``stem``: to continue training a
     saved agent. Its settings (clip, gamma, ...) stay the venv's (the config's)."""
     stem = Path(stem)
+    now = _obs_statistics(venv)
     try:
         arrays = _statistics_arrays(stem)
         ret_mean, ret_var = arrays["ret_mean"], arrays["ret_var"]
         ret_count = float(arrays["ret_count"])
-        if venv.norm_obs:
-            obs_mean, obs_var = arrays["obs_mean"], arrays["obs_var"]
-            obs_count = float(arrays["obs_count"])
+        meta: dict[str, Any] = {"norm_obs": bool(now)}
+        if now and None not in now:
+            meta["norm_obs_keys"] = sorted(now)
+        saved = _saved_obs_statistics(meta, arrays)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz: {exc}"
         raise ValueError(msg) from exc
-    if venv.norm_obs:
-        if obs_mean.shape != venv.obs_rms.mean.shape:
-            raise ValueError(f"the VecNormalize statistics {stem}.npz are for observations of "
-                             f"shape {obs_mean.shape}, the env gives "
-                             f"{venv.obs_rms.mean.shape}: the agent was trained on another "
-                             "observation")  # fmt: skip
-        venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = obs_mean, obs_var, obs_count
+    for key, rms in now.items():
+        mean, var, count = saved[key]
+        if mean.shape != rms.mean.shape:
+            part = "observations" if key is None else f"the observation's {key!r}"
+            raise ValueError(f"the VecNormalize statistics {stem}.npz are for {part} of "
+                             f"shape {mean.shape}, the env gives {rms.mean.shape}: the agent "
+                             "was trained on another observation")  # fmt: skip
+        rms.mean, rms.var, rms.count = mean, var, count
     if ret_mean.shape != venv.ret_rms.mean.shape:
         raise ValueError(f"the VecNormalize statistics {stem}.npz hold a return of shape "
                          f"{ret_mean.shape}, the env's is {venv.ret_rms.mean.shape}")  # fmt: skip

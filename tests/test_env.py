@@ -245,7 +245,7 @@ def test_flow_from_action_maps_the_square_onto_the_disk() -> None:
 # ---- the checkers -----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("obs_mode", ["vector", "image"])
+@pytest.mark.parametrize("obs_mode", ["vector", "image", "dict"])
 def test_gymnasium_check_env(kw: dict, obs_mode: str) -> None:
     from gymnasium.utils.env_checker import check_env
 
@@ -255,7 +255,7 @@ def test_gymnasium_check_env(kw: dict, obs_mode: str) -> None:
     env.close()
 
 
-@pytest.mark.parametrize("obs_mode", ["vector", "image"])
+@pytest.mark.parametrize("obs_mode", ["vector", "image", "dict"])
 def test_sb3_check_env(kw: dict, obs_mode: str) -> None:
     from stable_baselines3.common.env_checker import check_env
 
@@ -760,7 +760,7 @@ KEYWORDS = st.fixed_dictionaries(
         "n_trace_points": st.integers(1, 8),
         "n_target_points": st.integers(1, 8),
         "target_spacing": st.floats(0.1, 20.0),
-        "obs_mode": st.sampled_from(["vector", "image"]),
+        "obs_mode": st.sampled_from(["vector", "image", "dict"]),
         "failure_penalty": st.floats(0.0, 5.0),
         "reset_advance": st.floats(0.0, 3.0),
         "pattern_every": st.integers(0, 3),
@@ -793,7 +793,8 @@ def test_fuzz_steps_are_finite_or_fail_cleanly(keywords, target, seed, acts, cac
                 continue
             obs, reward, terminated, _truncated, info = env.step(action)
             assert obs in env.observation_space
-            assert np.all(np.isfinite(obs.astype(np.float64)))
+            for part in obs.values() if isinstance(obs, dict) else (obs,):
+                assert np.all(np.isfinite(part.astype(np.float64)))
             assert math.isfinite(reward) and math.isfinite(info["score"])
             assert reward == sum(info[k] for k in REWARD_KEYS)
             assert info["flow_vbar"] <= env.vbar_max
@@ -916,6 +917,25 @@ def test_image_observation_shows_the_routes_corridor_keepouts_and_pads(rkw: dict
         assert np.array_equal(obs["route", name][..., 0], obs["path", name][..., 0])
     with pytest.raises(ValueError, match="image_layers"):
         CNTDepositEnv(**rkw, obs_mode="image", image_layers="all")
+
+
+def test_dict_observation_is_the_image_and_the_vector_of_the_same_episode(rkw: dict) -> None:
+    """obs_mode="dict" holds exactly the image and the vector that the "image" and
+    "vector" envs give on the same seed, route and actions (one simulation, two views)."""
+    route = {"waypoints": [[0, 0], [40, 0], [40, 30]], "width": 6.0,
+             "keepouts": [{"rect": [10, 10, 25, 20]}]}  # fmt: skip
+    acts = [np.array([1.0, 0.0], np.float32), np.array([0.3, 0.8], np.float32)]
+    seen: dict[str, list] = {}
+    for mode in ("vector", "image", "dict"):
+        env = CNTDepositEnv(**rkw, obs_mode=mode)
+        obs = [env.reset(seed=3, options={"target": route})[0]]
+        obs += [env.step(a)[0] for a in acts]
+        seen[mode] = obs
+        assert all(env.observation_space.contains(o) for o in obs)
+    for d, image, vector in zip(seen["dict"], seen["image"], seen["vector"], strict=True):
+        assert set(d) == {"image", "vector"}
+        assert np.array_equal(d["image"], image) and np.array_equal(d["vector"], vector)
+    assert not np.array_equal(seen["dict"][0]["image"], seen["dict"][-1]["image"])
 
 
 def test_route_episode_truncates_at_its_length_and_completes(rkw: dict) -> None:

@@ -209,3 +209,25 @@ def test_a_missing_listed_file_fails_the_manifest(tmp_path: Path) -> None:
     (d / "ppo_vecnormalize.npz").unlink()
     with pytest.raises(UntrustedModelError, match="listed but missing"):
         load_policy(d / "ppo.zip")
+
+
+def test_a_dict_space_is_rebuilt_from_its_text_and_anything_else_refused() -> None:
+    """A Dict observation (obs_mode "dict") is rebuilt from the text SB3 writes beside its
+    pickle: Boxes only, every one of them read, bounds of one value or an array."""
+    from gymnasium import spaces
+
+    from policies.sb3 import _space
+
+    want = spaces.Dict({
+        "image": spaces.Box(0, 255, (3, 8, 8), np.uint8),
+        "vector": spaces.Box(np.array([-1.0, -1000.0], np.float32),
+                             np.array([1.0, 5.0], np.float32)),
+    })  # fmt: skip
+    item = {":type:": "<class 'gymnasium.spaces.dict.Dict'>", ":serialized:": "x",
+            "spaces": str(want.spaces)}  # fmt: skip
+    assert _space(item) == want
+    for bad in ("{'image': Discrete(3)}",
+                str(want.spaces).replace("'vector': Box", "'vector': MultiBinary(2), 'v': Box"),
+                "{'image': Box(0, 255, (3, 8, 8), object)}", ""):  # fmt: skip
+        with pytest.raises(UntrustedModelError):
+            _space({**item, "spaces": bad})

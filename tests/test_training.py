@@ -748,7 +748,7 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
                                 {"features_dim": 16}},
               "callback": [{"training.callbacks.HeldOutEval": {  # syncs the statistics
                   "eval_targets": ["u_turn"], "eval_freq": 32, "n_eval_episodes": 1}}]}  # fmt: skip
-    assert normalize_settings(config, image=True) == {"norm_obs": False, "norm_reward": True}
+    assert normalize_settings(config, obs_mode="image") == {"norm_obs": False, "norm_reward": True}
     model = train("ppo", config, tmp_path / "cnn", seed=0, progress_bar=False)
     assert (tmp_path / "cnn" / "evaluations.npz").is_file()
     best = load_policy(tmp_path / "cnn" / "best_model.zip", algo="ppo")
@@ -790,9 +790,81 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
 
     assert set(eval_set_baselines(tmp_path / "cnn")) == {"scripted", "random"}
     bad = {**config, "normalize": {"norm_obs": True}}
-    with pytest.raises(ValueError, match="norm_obs=True on an image"):
+    with pytest.raises(ValueError, match="norm_obs on an image"):
         train("ppo", bad, tmp_path / "refused", seed=0, progress_bar=False)
     residual = {**config, "normalize": True, "env_wrapper": [
+        {"training.common.ResidualAction": {"base": "scripted", "scale": 0.5}}]}  # fmt: skip
+    with pytest.raises(ValueError, match="residual agent"):
+        train("ppo", residual, tmp_path / "refused", seed=0, progress_bar=False)
+    assert not (tmp_path / "refused").exists()
+
+
+def test_a_dict_policy_normalises_the_vector_not_the_image_and_loads_safely(tmp_path) -> None:
+    """obs_mode "dict" (MultiInputPolicy): normalize: true normalises the reward and the
+    "vector" part only, the per-key statistics save, load (without unpickling the model)
+    and restore, and the loaded policy acts as the model does on the normalised vector and
+    the raw image. Normalising the image, a residual base or a frame stack is refused."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from policies.sb3 import SB3Policy, restore_vecnormalize
+    from training.common import make_env, normalize_settings
+    from training.train import train
+
+    dict_env = {**SMALL, "obs_mode": "dict"}
+    config = {**tiny_config(), "n_timesteps": 64, "policy": "MultiInputPolicy",
+              "normalize": True, "env_kwargs": dict_env,
+              "policy_kwargs": {"net_arch": [16], "features_extractor_kwargs":
+                                {"cnn_output_dim": 16}},
+              "callback": [{"training.callbacks.HeldOutEval": {
+                  "eval_targets": ["u_turn"], "eval_freq": 32, "n_eval_episodes": 1}}]}  # fmt: skip
+    assert normalize_settings(config, obs_mode="dict") == {
+        "norm_obs": True, "norm_obs_keys": ["vector"], "norm_reward": True}  # fmt: skip
+    model = train("ppo", config, tmp_path / "multi", seed=0, progress_bar=False)
+    assert (tmp_path / "multi" / "best_model.zip").is_file()
+    stats = model.with_name("ppo_vecnormalize")
+    with np.load(stats.with_suffix(".npz")) as d:
+        assert sorted(d.files) == ["obs_count.vector", "obs_mean.vector", "obs_var.vector",
+                                   "ret_count", "ret_mean", "ret_var"]  # fmt: skip
+        n_vector = d["obs_mean.vector"].shape
+    policy = load_policy(model)  # trust=False: the Dict space is rebuilt from its text
+    assert set(policy.vecnormalize.obs_rms) == {"vector"}
+    assert policy.vecnormalize.obs_rms["vector"].mean.shape == n_vector
+    env = make_env(dict_env, 30)
+    obs, _ = env.reset(seed=2, options={"target": "jog"})
+    policy.reset(2)
+    for _ in range(3):
+        o = {"image": obs["image"][None],
+             "vector": policy.vecnormalize.normalize_obs({"vector": obs["vector"][None]})[
+                 "vector"]}  # fmt: skip
+        assert not np.array_equal(o["vector"][0], obs["vector"])  # normalised
+        want, _ = policy.model.predict(o, deterministic=True)
+        got = policy.act(obs)
+        np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
+        obs, *_ = env.step(got)
+    env.close()
+    venv = VecNormalize.load(str(stats.with_suffix(".pkl")),
+                             DummyVecEnv([lambda: make_env(dict_env, 30)]))  # fmt: skip
+    before = venv.obs_rms["vector"].count
+    venv.obs_rms["vector"].count = 1.0
+    restore_vecnormalize(venv, stats)
+    assert venv.obs_rms["vector"].count == before
+    venv.close()
+    again = train("ppo", config, tmp_path / "multi_again", seed=0, progress_bar=False,
+                  trained_agent=model)  # fmt: skip
+    assert again.is_file()
+    from training.evaluate import evaluate  # beside the follower, each on its own view
+
+    table = evaluate(["scripted", "multi"], ["u_turn"], [0], tiny_config(), tmp_path / "eval",
+                     jobs=1, models=tmp_path / "empty", model_paths={"multi": model})  # fmt: skip
+    assert {r["policy"] for r in table} >= {"scripted", "multi"}
+    with pytest.raises(ValueError, match="acts alone"):
+        SB3Policy(policy.model, policy.vecnormalize, frame_stack=2)
+    for bad in ({"norm_obs": True, "norm_obs_keys": ["image", "vector"]},
+                {"norm_obs": True, "norm_obs_keys": None}):  # fmt: skip
+        with pytest.raises(ValueError, match="norm_obs on an image"):
+            train("ppo", {**config, "normalize": bad}, tmp_path / "refused", seed=0,
+                  progress_bar=False)  # fmt: skip
+    residual = {**config, "env_wrapper": [
         {"training.common.ResidualAction": {"base": "scripted", "scale": 0.5}}]}  # fmt: skip
     with pytest.raises(ValueError, match="residual agent"):
         train("ppo", residual, tmp_path / "refused", seed=0, progress_bar=False)

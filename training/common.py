@@ -54,11 +54,11 @@ __all__ = [
     "fresh_dir",
     "held_out_names",
     "held_out_targets",
-    "image_observation",
     "limit_threads",
     "load_config",
     "make_env",
     "normalize_settings",
+    "observation_mode",
     "positive_float",
     "positive_int",
     "score_mode",
@@ -130,12 +130,12 @@ def check_run_config(config: dict[str, Any]) -> None:
     integers, an episode cap (``env_kwargs.max_episode_steps``) of at least 1, and no
     normalised image observation nor residual agent on the image."""
     env_settings(config)  # the episode cap
-    image = image_observation(config)
-    normalize_settings(config, image=image)
-    if image and residual_settings(config) is not None:
+    mode = observation_mode(config)
+    normalize_settings(config, obs_mode=mode)
+    if mode != "vector" and residual_settings(config) is not None:
         raise ValueError("a residual agent (env_wrapper ResidualAction) acts over the route "
                          "follower, which reads the vector observation: drop obs_mode: "
-                         "image, or train a plain agent on the image")  # fmt: skip
+                         f"{mode}, or train a plain agent on it")  # fmt: skip
     _positive_int_setting("n_timesteps", config.get("n_timesteps"))
     _positive_int_setting("n_envs", config.get("n_envs", DEFAULT_N_ENVS))
 
@@ -249,30 +249,36 @@ def curriculum_settings(config: dict[str, Any]) -> list[tuple[float, dict[str, A
     return out
 
 
-def image_observation(config: dict[str, Any]) -> bool:
-    """Whether the config's env gives the image observation (``obs_mode: image``)."""
-    return env_settings(config)[0].get("obs_mode") == "image"
+def observation_mode(config: dict[str, Any]) -> str:
+    """The config's ``env_kwargs.obs_mode``: "vector" (the env's default), "image" or
+    "dict" (both; SB3's MultiInputPolicy)."""
+    return str(env_settings(config)[0].get("obs_mode", "vector"))
 
 
-def normalize_settings(config: dict[str, Any], image: bool = False) -> dict[str, Any]:
+def normalize_settings(config: dict[str, Any], obs_mode: str = "vector") -> dict[str, Any]:
     """VecNormalize kwargs of ``normalize`` (rl-zoo: ``true``, a dict, or a string
     ``"dict(norm_obs=True, norm_reward=False)"``); {} for none.
 
-    ``image``: the observation is an image (``obs_mode: image``). Its observation is then
-    not normalised by default (SB3's CnnPolicy scales the uint8 pixels by 1/255 itself and
-    rejects the floats VecNormalize would give it); only the reward is. Asking for
-    ``norm_obs=True`` on an image raises ValueError."""
+    An image is never normalised (SB3's CNN policies scale the uint8 pixels by 1/255
+    themselves and reject the floats VecNormalize would give them): on ``obs_mode``
+    "image" only the reward is, and on "dict" the reward and the "vector" part
+    (``norm_obs_keys: [vector]``). Asking to normalise an image raises ValueError."""
     from .callbacks import policy_kwargs
 
     value = config.get("normalize")
     if not value:
         return {}
     extra = {} if value is True else policy_kwargs(value)
-    out = {"norm_obs": not image, "norm_reward": True, **extra}
-    if image and out["norm_obs"]:
-        raise ValueError("normalize: norm_obs=True on an image observation: VecNormalize "
-                         "would turn the uint8 image into floats, which SB3's CnnPolicy "
-                         "rejects; drop norm_obs (the policy scales the pixels)")  # fmt: skip
+    default = {"image": {"norm_obs": False}, "dict": {"norm_obs": True,
+               "norm_obs_keys": ["vector"]}}.get(obs_mode, {"norm_obs": True})  # fmt: skip
+    out = {**default, "norm_reward": True, **extra}
+    keys = out.get("norm_obs_keys")  # None: every key (VecNormalize's default)
+    if out["norm_obs"] and (obs_mode == "image" or (obs_mode == "dict" and (
+            keys is None or "image" in keys))):  # fmt: skip
+        raise ValueError("normalize: norm_obs on an image observation: VecNormalize would "
+                         "turn the uint8 image into floats, which SB3's CNN policies "
+                         "reject; drop norm_obs on an image (the policy scales the pixels), "
+                         "or on obs_mode dict set norm_obs_keys: [vector]")  # fmt: skip
     return out
 
 

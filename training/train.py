@@ -82,11 +82,11 @@ from .common import (
     eval_env_settings,
     eval_settings,
     fresh_dir,
-    image_observation,
     limit_threads,
     load_config,
     make_env,
     normalize_settings,
+    observation_mode,
     parse_cli,
     positive_float,
     positive_int,
@@ -208,8 +208,8 @@ def train(
         wrapper_kwargs=residual or None,
     )
     score_mode = venv.get_attr("score_mode", [0])[0]
-    image = image_observation(config)
-    norm = normalize_settings(config, image=image)
+    obs_mode = observation_mode(config)
+    norm = normalize_settings(config, obs_mode=obs_mode)
     if norm:
         venv = VecNormalize(venv, gamma=float(config.get("gamma", 0.99)), **norm)
     normalizer = venv  # what is saved as the VecNormalize statistics
@@ -258,10 +258,11 @@ def train(
         eval_env = DummyVecEnv([eval_env_fn])
         if norm:
             eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
-                                    norm_obs=bool(norm["norm_obs"]))  # fmt: skip
+                                    norm_obs=bool(norm["norm_obs"]),
+                                    norm_obs_keys=norm.get("norm_obs_keys"))  # fmt: skip
         if n_stack > 1:
             eval_env = VecFrameStack(eval_env, n_stack)
-        if image:  # as SB3 wraps the training env for its CNN: the
+        if obs_mode != "vector":  # as SB3 wraps the training env for its CNN: the
             eval_env = VecTransposeImage(eval_env)  # chains must match to sync statistics
         callbacks.append(
             EvalCallback(
@@ -397,7 +398,7 @@ def check_acts_alike(saved: dict[str, Any], config: dict[str, Any], new_base_opt
     if frame_stack(saved) != frame_stack(config):
         raise ValueError(f"{name} was trained on a frame stack of {frame_stack(saved)}, "
                          f"the config asks for {frame_stack(config)}")  # fmt: skip
-    if normalised != bool(normalize_settings(config, image=image_observation(config))):
+    if normalised != bool(normalize_settings(config, obs_mode=observation_mode(config))):
         raise ValueError(f"{name} was trained {'with' if normalised else 'without'} "
                          "VecNormalize statistics (normalize: true) and the config "
                          f"{'does not normalise' if normalised else 'normalises'}")  # fmt: skip

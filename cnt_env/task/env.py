@@ -72,7 +72,9 @@ START_MIRROR = ("never", "always", "random")
 DEFAULT_MAX_EPISODE_STEPS = MAX_EPISODE_STEPS
 #: Most physics steps one control step may take.
 MAX_SUBSTEPS = 100_000
-OBS_MODES = ("vector", "image")
+#: ``obs_mode``: "dict" gives both, ``{"image": ..., "vector": ...}`` (SB3's
+#: MultiInputPolicy).
+OBS_MODES = ("vector", "image", "dict")
 IMAGE_LAYERS = ("route", "path")
 #: How render() draws (the env's ``render_style``).
 RENDER_STYLES = ("figure", "raster")
@@ -153,6 +155,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     (the default) also show, beneath those, the corridor in channel 1 (64) and the
     keep-outs (96, filled) and pads (160; rectangles when ``pad_width`` > 0) in channel 2;
     ``"path"`` leaves them out (the image before 2026-12-07).
+
+    ``obs_mode="dict"``: ``Dict({"image": <the image>, "vector": <the vector>})``, both as
+    above, for policies that take several inputs (SB3's ``MultiInputPolicy``: a CNN on
+    the image, the vector flattened beside it).
 
     ## Rewards
 
@@ -257,7 +263,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
     | `precision_weight` | 0.25         | thin: w_p                                       |
     | `progress_weight`  | 0.25         | thin: w_g                                       |
     | `failure_penalty`  | 1.0          | paid once on a simulation failure               |
-    | `obs_mode`         | "vector"     | "vector" or "image"                             |
+    | `obs_mode`         | "vector"     | "vector", "image" or "dict" (both)              |
     | `image_size`       | 64           | S of the image observation (>= 64 pixels)       |
     | `image_extent`     | 64.0         | side of the image observation (L_vb)            |
     | `image_layers`     | "route"      | "route": the image shows the corridor, pads and |
@@ -426,11 +432,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_structure: dict[str, int] = dict(self.layout.structure)
         self.observation_slices: dict[str, slice] = dict(self.layout.slices)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        if self.obs_mode == "vector":
-            self.observation_space = self.layout.space()
-        else:
-            size = self.image_size
-            self.observation_space = spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8)
+        size = self.image_size
+        image_space = spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8)
+        self.observation_space = {
+            "vector": self.layout.space(), "image": image_space,
+            "dict": spaces.Dict({"image": image_space, "vector": self.layout.space()}),
+        }[self.obs_mode]  # fmt: skip
 
         self._sim: DepositionSim | None = None
         self._episode_index = 0  # successful resets (episode_index)
@@ -621,12 +628,11 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         metrics = self._last_metrics = self._metrics(trace)
         potentials = self._score.potentials(metrics)
         obs = self._observation(trace, metrics)
-        if self._failure is None and not np.all(np.isfinite(obs)):
+        parts = obs.values() if isinstance(obs, dict) else (obs,)
+        if self._failure is None and not all(np.all(np.isfinite(o)) for o in parts):
             self._failure = "non-finite simulator state"
         if self._failure is not None:
-            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
-            if obs.dtype != np.uint8:
-                obs = self.layout.clip(obs)
+            obs = self._within_space(obs)
             potentials = self._potentials  # a failed state scores nothing new
         delta = potentials - self._potentials
         self._potentials = potentials
@@ -702,18 +708,36 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         return info
 
     # ---- observation (task/spaces.py, task/raster.py) -------------------------------------
-    def _observation(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
-        sim = self._sim
+    def _observation(self, trace: np.ndarray,
+                     metrics: dict[str, Any]) -> np.ndarray | dict[str, np.ndarray]:  # fmt: skip
         if self.obs_mode == "image":
-            layers = None
-            if self.score_mode == "corridor" and self.image_layers == "route":
-                layers = raster.RouteLayers(self.target.width, self._pads_abs,
-                                            self.target.pad_width, self._keepouts_abs)  # fmt: skip
-            return raster.image_observation(
-                self.image_size, self.image_extent, trace[:, [0, 2]], self._n0,
-                self._target_abs, self._target_done(metrics), sim.suspended_nodes[:, [0, 2]],
-                layers,
-            )  # fmt: skip
+            return self._image(trace, metrics)
+        if self.obs_mode == "dict":
+            return {"image": self._image(trace, metrics), "vector": self._vector(trace, metrics)}
+        return self._vector(trace, metrics)
+
+    def _within_space(self, obs: np.ndarray | dict[str, np.ndarray]):
+        """``obs`` with any non-finite value zeroed and the vector clipped to its bounds
+        (after a failure; the image is uint8, always finite)."""
+        if isinstance(obs, dict):
+            return {k: self._within_space(o) for k, o in obs.items()}
+        if obs.dtype == np.uint8:
+            return obs
+        return self.layout.clip(np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0))
+
+    def _image(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
+        layers = None
+        if self.score_mode == "corridor" and self.image_layers == "route":
+            layers = raster.RouteLayers(self.target.width, self._pads_abs,
+                                        self.target.pad_width, self._keepouts_abs)  # fmt: skip
+        return raster.image_observation(
+            self.image_size, self.image_extent, trace[:, [0, 2]], self._n0,
+            self._target_abs, self._target_done(metrics), self._sim.suspended_nodes[:, [0, 2]],
+            layers,
+        )  # fmt: skip
+
+    def _vector(self, trace: np.ndarray, metrics: dict[str, Any]) -> np.ndarray:
+        sim = self._sim
         m = self.n_target_points
         s_ahead = np.minimum(metrics["furthest"] + self.target_spacing * np.arange(1, m + 1),
                              self._target_length)  # fmt: skip
