@@ -728,6 +728,22 @@ def test_frame_stack_trains_and_loads_with_the_stack_sb3_builds(tmp_path: Path) 
             frame_stack({"frame_stack": bad})
 
 
+def _acts_as_its_model(policy, env_kwargs: dict, model_input) -> None:
+    """Over three steps of the small rod's "jog", ``policy.act(obs)`` is the model's
+    deterministic action for ``model_input(obs)`` (what the model should be given)."""
+    from training.common import make_env
+
+    env = make_env(env_kwargs, 30)
+    obs, _ = env.reset(seed=2, options={"target": "jog"})
+    policy.reset(2)
+    for _ in range(3):
+        want, _ = policy.model.predict(model_input(obs), deterministic=True)
+        got = policy.act(obs)
+        np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
+        obs, *_ = env.step(got)
+    env.close()
+
+
 def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statistics(
     tmp_path: Path,
 ) -> None:
@@ -758,15 +774,7 @@ def test_an_image_policy_trains_on_raw_pixels_and_loads_with_its_reward_statisti
         assert sorted(d.files) == ["ret_count", "ret_mean", "ret_var"]
     policy = load_policy(model)
     assert policy.vecnormalize.norm_obs is False
-    env = make_env(image_env, 30)
-    obs, _ = env.reset(seed=2, options={"target": "jog"})
-    policy.reset(2)
-    for _ in range(3):
-        want, _ = policy.model.predict(obs, deterministic=True)
-        got = policy.act(obs)
-        np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
-        obs, *_ = env.step(got)
-    env.close()
+    _acts_as_its_model(policy, image_env, lambda obs: obs)
     # the pickle VecNormalize.load reads, and going on from the saved statistics
     venv = VecNormalize.load(str(stats.with_suffix(".pkl")),
                              DummyVecEnv([lambda: make_env(image_env, 30)]))  # fmt: skip
@@ -829,19 +837,14 @@ def test_a_dict_policy_normalises_the_vector_not_the_image_and_loads_safely(tmp_
     policy = load_policy(model)  # trust=False: the Dict space is rebuilt from its text
     assert set(policy.vecnormalize.obs_rms) == {"vector"}
     assert policy.vecnormalize.obs_rms["vector"].mean.shape == n_vector
-    env = make_env(dict_env, 30)
-    obs, _ = env.reset(seed=2, options={"target": "jog"})
-    policy.reset(2)
-    for _ in range(3):
-        o = {"image": obs["image"][None],
-             "vector": policy.vecnormalize.normalize_obs({"vector": obs["vector"][None]})[
-                 "vector"]}  # fmt: skip
-        assert not np.array_equal(o["vector"][0], obs["vector"])  # normalised
-        want, _ = policy.model.predict(o, deterministic=True)
-        got = policy.act(obs)
-        np.testing.assert_array_equal(got, np.asarray(want, np.float32).reshape(-1))
-        obs, *_ = env.step(got)
-    env.close()
+    rms = policy.vecnormalize.obs_rms["vector"]
+
+    def model_input(obs: dict) -> dict:  # VecNormalize's formula on the vector alone
+        v = (obs["vector"] - rms.mean) / np.sqrt(rms.var + policy.vecnormalize.epsilon)
+        clip = policy.vecnormalize.clip_obs
+        return {"image": obs["image"][None], "vector": np.clip(v, -clip, clip)[None]}
+
+    _acts_as_its_model(policy, dict_env, model_input)
     venv = VecNormalize.load(str(stats.with_suffix(".pkl")),
                              DummyVecEnv([lambda: make_env(dict_env, 30)]))  # fmt: skip
     before = venv.obs_rms["vector"].count
