@@ -58,6 +58,27 @@ def test_tiny_ppo_run_is_deterministic(tmp_path: Path) -> None:
     assert np.all(np.abs(a) <= 1.0)
 
 
+@pytest.mark.parametrize("obs_mode", ["image", "dict"])
+def test_a_tiny_cnn_run_is_deterministic(tmp_path: Path, obs_mode: str) -> None:
+    """The CNN policies (image, dict) train to the same weights, bit for bit, from the
+    same seed, and to other weights from another (torch on the CPU, one thread)."""
+    from policies.sb3 import algo_class
+    from training.train import train
+
+    policy = {"image": "CnnPolicy", "dict": "MultiInputPolicy"}[obs_mode]
+    extractor = {"image": {"features_dim": 16}, "dict": {"cnn_output_dim": 16}}[obs_mode]
+    kwargs = {"net_arch": [16], "features_extractor_kwargs": extractor}
+    config = {**tiny_config(), "n_timesteps": 64, "policy": policy, "normalize": True,
+              "env_kwargs": {**SMALL, "obs_mode": obs_mode}, "policy_kwargs": kwargs}  # fmt: skip
+    weights = []
+    for i, seed in enumerate((7, 7, 8)):
+        path = train("ppo", config, tmp_path / f"run{i}", seed=seed, progress_bar=False)
+        params = algo_class("ppo").load(str(path), device="cpu").policy.state_dict()
+        weights.append({k: v.numpy().copy() for k, v in params.items()})
+    same = [all(np.array_equal(w[k], weights[0][k]) for k in w) for w in weights[1:]]
+    assert same == [True, False]
+
+
 @pytest.mark.skipif(not (PRETRAINED_DIR / "ppo.zip").is_file(), reason="no pretrained models")
 def test_evaluate_one_route_with_pretrained_models(tmp_path: Path) -> None:
     """Every policy, with the pretrained models on the env settings they were trained on
