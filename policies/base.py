@@ -23,6 +23,7 @@ __all__ = [
     "option_defaults",
     "policy_options",
     "require_vector_observation",
+    "vector_part",
 ]
 
 
@@ -35,13 +36,19 @@ def option_defaults(cls: type, exclude: tuple[str, ...]) -> dict[str, Any]:
 
 
 def require_vector_observation(env: Any, who: str) -> None:
-    """ValueError unless the (unwrapped) ``env`` gives the vector observation: ``who``
+    """ValueError unless the (unwrapped) ``env`` gives the vector observation, alone or
+    as the "vector" part of a Dict (``obs_mode="dict"``; :func:`vector_part`): ``who``
     reads the trace, the route ahead and the keep-out from its slices, which an image
     does not have (it would read pixels as positions)."""
-    if getattr(env, "obs_mode", "vector") != "vector":
+    if getattr(env, "obs_mode", "vector") not in ("vector", "dict"):
         raise ValueError(f"{who} reads the vector observation, but the env gives "
-                         f"obs_mode={env.obs_mode!r}: use obs_mode='vector' (a residual "
-                         "agent's base, cnt-evaluate's scripted baseline)")  # fmt: skip
+                         f"obs_mode={env.obs_mode!r}: use obs_mode='vector' or 'dict' (a "
+                         "residual agent's base, cnt-evaluate's scripted baseline)")  # fmt: skip
+
+
+def vector_part(obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    """The vector observation: ``obs`` itself, or the "vector" part of a Dict one."""
+    return obs["vector"] if isinstance(obs, dict) else obs
 
 
 def policy_options(policy: Any) -> dict[str, Any]:

@@ -155,8 +155,10 @@ class HeadingGate:
         """Whether the follower plays the episode ``obs`` belongs to, decided at its first
         observation (the first after :meth:`reset`)."""
         if self._pending:
+            from .base import vector_part
             from .opening import route_axis
 
+            obs = vector_part(obs)
             self.deferred = (bool(self.headings) and has_keepout(obs, self.slices)
                              and route_axis(obs, self.slices) in self.headings)  # fmt: skip
             self._pending = False

@@ -175,7 +175,7 @@ from cnt_env.task.geometry import inside_polygon, nearest_on_boundary, outward_n
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
 
-from .base import option_defaults, require_vector_observation
+from .base import option_defaults, require_vector_observation, vector_part
 from .scripted import amplitude_curve
 
 __all__ = ["RouteFollower"]
@@ -468,8 +468,8 @@ class RouteFollower:
         lean = math.cos(phi) * math.sin(phi)  # > 0: the flow leans off ±z clockwise
         return -self.unhook if lean > 1e-12 else self.unhook  # 1e-12: cos(pi/2) rounds
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        o = np.asarray(obs, dtype=float)
+    def act(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        o = np.asarray(vector_part(obs), dtype=float)
         past = o[self.slices["trace"]].reshape(-1, 2)
         ahead = o[self.slices["target"]].reshape(-1, 2)
         route = o[self.slices["route"]]

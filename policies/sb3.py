@@ -361,11 +361,9 @@ class SB3Policy:
 
         #: a Dict observation (``obs_mode="dict"``): its parts pass to the model as they are
         self.multi_input = isinstance(getattr(model, "observation_space", None), spaces.Dict)
-        if self.multi_input and (base is not None or self.frame_stack > 1 or observe_base
-                                 or mirror is not None):  # fmt: skip
-            msg = ("a model of a Dict observation (obs_mode dict) acts alone: no residual "
-                   "base, frame_stack, observe_base or mirror_average")  # fmt: skip
-            raise ValueError(msg)
+        if self.multi_input and (self.frame_stack > 1 or observe_base or mirror is not None):
+            raise ValueError("a model of a Dict observation (obs_mode dict) takes no "
+                             "frame_stack, observe_base or mirror_average")  # fmt: skip
 
     def reset(self, seed: int | None = None) -> None:
         self._stacks = {}
@@ -381,9 +379,10 @@ class SB3Policy:
         ``keepout_headings`` the route's heading is read off the observation after it)."""
         if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
+        b = self.base.act(obs) if self.base is not None else None  # the vector's reader
         if self.multi_input:
-            return self._model_action(obs, mirrored=False)
-        b = self.base.act(obs) if self.base is not None else None
+            a = self._model_action(obs, mirrored=False)
+            return combine(b, a, self.scale) if b is not None else a
         o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
         a = self._model_action(o, mirrored=False)
         if self.mirror is not None:

@@ -28,7 +28,7 @@ import numpy as np
 
 from cnt_env.task.spaces import action_from_flow
 
-from .base import option_defaults, require_vector_observation
+from .base import option_defaults, require_vector_observation, vector_part
 
 __all__ = ["CURVE_RESOURCE", "ScriptedPolicy", "amplitude_curve", "amplitude_curve_from_csv"]
 
@@ -107,8 +107,8 @@ class ScriptedPolicy:
         """v̄ whose measured amplitude is closest to ``half_width`` (L_vb)."""
         return float(np.interp(half_width, self._amp, self._vbar))
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        ahead = np.asarray(obs[self.target_slice], dtype=float).reshape(-1, 2)
+    def act(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        ahead = np.asarray(vector_part(obs)[self.target_slice], dtype=float).reshape(-1, 2)
         aim = ahead[: self.lookahead].mean(axis=0)
         if math.hypot(*aim) < 1e-9:
             return np.zeros(2, dtype=np.float32)

@@ -592,9 +592,31 @@ def test_the_baselines_that_read_the_vector_observation_refuse_an_image(score: s
     image they would read pixels as positions, so they refuse it and say what to do."""
     env = gymnasium.make("CNTDeposit-v0", **small(score=score), obs_mode="image")
     cls = RouteFollower if score == "corridor" else ScriptedPolicy
-    with pytest.raises(ValueError, match="obs_mode='vector'"):
+    with pytest.raises(ValueError, match="obs_mode='vector' or 'dict'"):
         cls.from_env(env)
     cls.from_env(gymnasium.make("CNTDeposit-v0", **small(score=score)))  # the vector: fine
+
+
+@pytest.mark.parametrize("score", ["corridor", "thin"])
+def test_the_baselines_read_the_vector_part_of_a_dict_observation(score: str) -> None:
+    """On obs_mode "dict" the follower and the scripted policy read its "vector" part: they
+    play the episode they play on the vector observation, action for action."""
+    cls = RouteFollower if score == "corridor" else ScriptedPolicy
+    target = {"corridor": "u_turn", "thin": "jog"}[score]
+    played = {}
+    for mode in ("vector", "dict"):
+        env = gymnasium.make("CNTDeposit-v0", **small(score=score), obs_mode=mode)
+        policy = cls.from_env(env)
+        obs, _ = env.reset(seed=4, options={"target": target})
+        policy.reset(4)
+        actions = []
+        for _ in range(6):
+            actions.append(policy.act(obs))
+            obs, *_ = env.step(actions[-1])
+        played[mode] = np.array(actions)
+        env.close()
+    assert np.array_equal(played["vector"], played["dict"])
+    assert np.ptp(played["vector"], axis=0).max() > 0  # it steers: the actions change
 
 
 def test_an_ensemble_must_observe_one_way(tmp_path) -> None:

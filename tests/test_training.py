@@ -835,6 +835,7 @@ def test_a_dict_policy_normalises_the_vector_not_the_image_and_loads_safely(tmp_
     the raw image. Normalising the image, a residual base or a frame stack is refused."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
+    from policies.residual import combine
     from policies.sb3 import SB3Policy, restore_vecnormalize
     from training.common import make_env, normalize_settings
     from training.train import train
@@ -881,18 +882,34 @@ def test_a_dict_policy_normalises_the_vector_not_the_image_and_loads_safely(tmp_
     table = evaluate(["scripted", "multi"], ["u_turn"], [0], tiny_config(), tmp_path / "eval",
                      jobs=1, models=tmp_path / "empty", model_paths={"multi": model})  # fmt: skip
     assert {r["policy"] for r in table} >= {"scripted", "multi"}
-    with pytest.raises(ValueError, match="acts alone"):
+    with pytest.raises(ValueError, match="takes no frame_stack"):
         SB3Policy(policy.model, policy.vecnormalize, frame_stack=2)
     for bad in ({"norm_obs": True, "norm_obs_keys": ["image", "vector"]},
                 {"norm_obs": True, "norm_obs_keys": None}):  # fmt: skip
         with pytest.raises(ValueError, match="norm_obs on an image"):
             train("ppo", {**config, "normalize": bad}, tmp_path / "refused", seed=0,
                   progress_bar=False)  # fmt: skip
+    assert not (tmp_path / "refused").exists()
+    # a residual agent over the follower, which reads the vector part
     residual = {**config, "env_wrapper": [
         {"training.common.ResidualAction": {"base": "scripted", "scale": 0.5}}]}  # fmt: skip
-    with pytest.raises(ValueError, match="residual agent"):
-        train("ppo", residual, tmp_path / "refused", seed=0, progress_bar=False)
-    assert not (tmp_path / "refused").exists()
+    path = train("ppo", residual, tmp_path / "residual", seed=0, progress_bar=False)
+    env = make_env(dict_env, 30)
+    agent = load_policy(path, env=env)
+    assert agent.base is not None and agent.scale == 0.5
+    twin = load_policy(path, env=env).base  # a copy of its base, kept in step with it
+    obs, _ = env.reset(seed=2, options={"target": "jog"})
+    agent.reset(2)
+    twin.reset(2)
+    for _ in range(3):
+        model_obs = {"image": obs["image"][None],
+                     "vector": agent.vecnormalize.normalize_obs(
+                         {"vector": obs["vector"][None]})["vector"]}  # fmt: skip
+        a, _ = agent.model.predict(model_obs, deterministic=True)
+        got = agent.act(obs)
+        np.testing.assert_array_equal(got, combine(twin.act(obs["vector"]), a.reshape(-1), 0.5))
+        obs, *_ = env.step(got)
+    env.close()
 
 
 def test_a_residual_agent_that_observes_its_base_acts_alike_in_training_and_at_inference(

@@ -132,10 +132,11 @@ def check_run_config(config: dict[str, Any]) -> None:
     env_settings(config)  # the episode cap
     mode = observation_mode(config)
     normalize_settings(config, obs_mode=mode)
-    if mode != "vector" and residual_settings(config) is not None:
+    if mode == "image" and residual_settings(config) is not None:
         raise ValueError("a residual agent (env_wrapper ResidualAction) acts over the route "
-                         "follower, which reads the vector observation: drop obs_mode: "
-                         f"{mode}, or train a plain agent on it")  # fmt: skip
+                         "follower, which reads the vector observation: use obs_mode: "
+                         "dict (the image and the vector), or train a plain agent on the "
+                         "image")  # fmt: skip
     _positive_int_setting("n_timesteps", config.get("n_timesteps"))
     _positive_int_setting("n_envs", config.get("n_envs", DEFAULT_N_ENVS))
 
