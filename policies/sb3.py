@@ -380,10 +380,8 @@ class SB3Policy:
         if self.gate is not None and self.gate.defers(obs):
             return np.asarray(self.gate.fallback.act(obs), dtype=np.float32)
         b = self.base.act(obs) if self.base is not None else None  # the vector's reader
-        if self.multi_input:
-            a = self._model_action(obs, mirrored=False)
-            return combine(b, a, self.scale) if b is not None else a
-        o = np.asarray(observe(obs, b) if self.observe_base else obs, dtype=np.float32)
+        o = obs if self.multi_input else np.asarray(observe(obs, b) if self.observe_base
+                                                    else obs, dtype=np.float32)  # fmt: skip
         a = self._model_action(o, mirrored=False)
         if self.mirror is not None:
             om = self.mirror(obs)
@@ -631,6 +629,15 @@ def _suffix(key: str | None) -> str:
     return "" if key is None else f".{key}"  # npz names: obs_mean, or obs_mean.<key>
 
 
+def _keys_meta(stats: dict[str | None, Any]) -> dict[str, Any]:
+    """The settings that name a normaliser's statistics: ``norm_obs``, and for a Dict
+    observation its ``norm_obs_keys`` (what :func:`_saved_obs_statistics` reads)."""
+    meta: dict[str, Any] = {"norm_obs": bool(stats)}
+    if stats and None not in stats:
+        meta["norm_obs_keys"] = sorted(stats)
+    return meta
+
+
 def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
     """Write ``<stem>.npz`` (obs and return running statistics; per key, ``obs_mean.<key>``,
     for a Dict observation) and ``<stem>.json`` (settings) for the VecNormalize ``venv``."""
@@ -645,10 +652,8 @@ def save_vecnormalize(venv, stem: Path) -> tuple[Path, Path]:
     npz = stem.with_suffix(".npz")
     np.savez(npz, **arrays)
     meta = {"clip_obs": venv.clip_obs, "clip_reward": venv.clip_reward, "gamma": venv.gamma,
-            "epsilon": venv.epsilon, "norm_obs": venv.norm_obs, "norm_reward": venv.norm_reward,
-            "format": "cnt_env vecnormalize 1"}  # fmt: skip
-    if stats and None not in stats:
-        meta["norm_obs_keys"] = sorted(stats)
+            "epsilon": venv.epsilon, "norm_reward": venv.norm_reward,
+            "format": "cnt_env vecnormalize 1", **_keys_meta(stats)}  # fmt: skip
     js = stem.with_suffix(".json")
     js.write_text(json.dumps(meta, indent=2) + "\n")
     return npz, js
@@ -694,10 +699,7 @@ def restore_vecnormalize(venv, stem: Path) -> None:
         arrays = _statistics_arrays(stem)
         ret_mean, ret_var = arrays["ret_mean"], arrays["ret_var"]
         ret_count = float(arrays["ret_count"])
-        meta: dict[str, Any] = {"norm_obs": bool(now)}
-        if now and None not in now:
-            meta["norm_obs_keys"] = sorted(now)
-        saved = _saved_obs_statistics(meta, arrays)
+        saved = _saved_obs_statistics(_keys_meta(now), arrays)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         msg = f"cannot read the VecNormalize statistics {stem}.npz: {exc}"
         raise ValueError(msg) from exc

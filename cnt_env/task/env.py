@@ -433,11 +433,10 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_slices: dict[str, slice] = dict(self.layout.slices)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         size = self.image_size
-        image_space = spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8)
-        self.observation_space = {
-            "vector": self.layout.space(), "image": image_space,
-            "dict": spaces.Dict({"image": image_space, "vector": self.layout.space()}),
-        }[self.obs_mode]  # fmt: skip
+        parts = {"image": spaces.Box(0, 255, shape=(size, size, 3), dtype=np.uint8),
+                 "vector": self.layout.space()}  # fmt: skip
+        self.observation_space = (spaces.Dict(parts) if self.obs_mode == "dict"
+                                  else parts[self.obs_mode])  # fmt: skip
 
         self._sim: DepositionSim | None = None
         self._episode_index = 0  # successful resets (episode_index)
