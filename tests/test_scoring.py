@@ -130,6 +130,34 @@ def test_route_outside_pads_and_shorts() -> None:
     assert score_route_trace(zig, r)["score"] == pytest.approx(t.sum())
 
 
+def test_the_route_score_never_rounds_below_zero() -> None:
+    """Φ = A (1 - o) (1 - k) from its terms summed as the env and the tables sum them
+    (np.sum): >= 0 to the last bit over random progress, pads, outside fractions and
+    shorts, and exactly 0 on a full short (k = 1), where the terms summed to -1.1e-16
+    before the short term was written as -(A - A o) k."""
+    from cnt_env.task.scoring import RouteScore
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    pads = np.array([[[20.0, -5.0], [20.0, 5.0]]])
+    score = RouteScore(line, 4.0, pads, ())
+    rng = np.random.default_rng(0)
+    full_short = []
+    for _ in range(4000):
+        m = {
+            "progress": rng.uniform(),
+            "pads_crossed": int(rng.integers(0, 2)),
+            "n_pads": 1,
+            "completed": bool(rng.integers(0, 2)),
+            "outside": rng.uniform(),
+            "short_length": rng.choice([0.0, rng.uniform(0.0, 20.0), 20.0, 1e3]),
+        }
+        phi = float(np.sum(score.potentials(m)))
+        assert 0.0 <= phi <= 1.0
+        if m["short_length"] >= 20.0:
+            full_short.append(phi)
+    assert full_short and all(phi == 0.0 for phi in full_short)
+
+
 @pytest.mark.parametrize("spacing", [1.0, 0.2, 0.05])
 def test_a_short_is_measured_in_length_whatever_the_node_spacing(spacing: float) -> None:
     """A straight trace through a keep-out 6 L_vb wide: the short's length is 6, and its

@@ -387,7 +387,11 @@ class RouteScore:
         a = float(pos.sum())
         o = metrics["outside"]
         k = min(1.0, SHORT_PENALTY * metrics["short_length"])
-        return np.array([pos[0], pos[1], pos[2], -a * o, -a * (1.0 - o) * k])
+        # short = -A (1 - o) k written as -(A - A o) k: the sum left to right is then
+        # x - x k with x = A - A o as rounded, >= 0 to the last bit and exactly 0 when
+        # k = 1 (A (1 - o) k gave -1.1e-16 on a full short)
+        kept = a - a * o
+        return np.array([pos[0], pos[1], pos[2], -a * o, -kept * k])
 
 
 def route_score(route: Any) -> RouteScore:
