@@ -541,6 +541,33 @@ def test_learning_curve_panels_part_runs_trained_on_different_envs(tmp_path: Pat
     assert labels == ["printed law, δ̄ 1", "printed law, δ̄ 1, flow x1.44, detour 2 in 3"]
 
 
+def test_runs_on_other_observations_share_a_panel_and_are_labelled_apart(
+    tmp_path: Path,
+) -> None:
+    """PPO on the vector, the image and the Dict (the same env, so one panel with one set
+    of baselines) are told apart by their labels; the vector run keeps its plain one."""
+    import yaml
+
+    from training.evaluate import curve_groups
+
+    ev = [{"training.callbacks.HeldOutEval": {"eval_targets": ["validation"],
+                                               "n_eval_episodes": 1}}]  # fmt: skip
+    runs = []
+    for mode in ("vector", "image", "dict"):
+        run = tmp_path / f"ppo_{mode}"
+        run.mkdir()
+        kw = {"drag_law": "printed", "delta_bar": 1.0} | (
+            {} if mode == "vector" else {"obs_mode": mode}
+        )
+        cfg = {"CNTDeposit-v0": {"env_kwargs": kw, "callback": ev},
+               "run": {"algo": "ppo", "seed": 0}}  # fmt: skip
+        (run / "config.yml").write_text(yaml.safe_dump(cfg))
+        np.savez(run / "evaluations.npz", timesteps=np.array([1]), results=np.array([[0.5]]))
+        runs.append(run)
+    (curves,) = curve_groups(runs).values()
+    assert [c[2] for c in curves] == ["ppo s0", "ppo s0 [image]", "ppo s0 [dict]"]
+
+
 def test_eval_env_kwargs_override_the_training_env_for_evaluation_only() -> None:
     """HeldOutEval's env_kwargs: the evaluation env is the training env with them over it
     (a fixed flow gain where training draws one per episode); without them, the same env.

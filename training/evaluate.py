@@ -92,6 +92,7 @@ from .common import (
     limit_threads,
     load_config,
     make_env,
+    observation_mode,
     parse_cli,
     positive_int,
     score_mode,
@@ -119,6 +120,8 @@ PRETRAINED = Path(__file__).resolve().parents[1] / "policies" / "pretrained"
 COLORS = {"random": "0.6", "constant": "tab:orange", "scripted": "tab:green",
           "ppo": "tab:blue", "sac": "tab:purple", "ppo_residual": "tab:cyan",
           "ppo_long": "tab:red"}  # fmt: skip
+#: Colours for a further run of a policy already drawn in a panel (none of the baselines').
+EXTRA_COLORS = ("tab:red", "tab:brown", "tab:pink", "tab:olive", "tab:gray", "tab:purple")
 #: The env's keywords that set only what a policy observes (not the physics, the task or
 #: the score): a trained model is evaluated with its own, from the config beside it, so
 #: that an image agent and the vector baselines play the same episodes.
@@ -505,8 +508,9 @@ CURVE_BASELINES = ("constant", "scripted", "random")
 
 def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]]:
     """A run's EvalCallback routes, its eval episodes per evaluation, its policy name
-    (``ppo``, ``sac``, ``ppo_residual``), a label with its seed, sample count and wall
-    time, and its config entry (from its config.yml; the directory name when absent)."""
+    (``ppo``, ``sac``, ``ppo_residual``), a label with its seed, observation (when not the
+    vector), sample count and wall time, and its config entry (from its config.yml; the
+    directory name when absent)."""
     path = Path(run) / "config.yml"
     if not path.is_file():
         return (), 0, Path(run).name.rsplit("_s", 1)[0], Path(run).name, {}
@@ -521,6 +525,8 @@ def _run_info(run: Path) -> tuple[tuple[str, ...], int, str, str, dict[str, Any]
     if (n_stack := frame_stack(cfg)) > 1:
         name += f"_stack{n_stack}"
     label = f"{name} s{meta.get('seed', '?')}"
+    if (obs := observation_mode(cfg)) != "vector":
+        label += f" [{obs}]"  # runs of one algorithm on other observations told apart
     if "timesteps_done" in meta and "wall_time_s" in meta:
         label += f" ({meta['timesteps_done']} steps, {meta['wall_time_s'] / 60:.0f} min)"
     return tuple(ev["eval_targets"]), ev["n_eval_episodes"], name, label, cfg
@@ -642,9 +648,13 @@ def plot_learning_curves(runs: Sequence[Path], out: Path, rows: Sequence[dict]) 
 
     fig, axes = plt.subplots(1, len(groups), figsize=(6 * len(groups), 4), squeeze=False)
     for ax, ((targets, env_label), curves) in zip(axes.flat, groups.items(), strict=True):
+        used: set[str] = set()
         for _, name, label, t, r in curves:
             m, s = r.mean(axis=1), r.std(axis=1)
             color = COLORS.get(name)
+            if color is None or color in used:  # a second run of one policy: its own colour
+                color = next((c for c in EXTRA_COLORS if c not in used), "k")
+            used.add(color)
             ax.plot(t, m, marker="o", label=label, color=color)
             ax.fill_between(t, m - s, m + s, alpha=0.2, color=color)
         if VALIDATION in targets:
