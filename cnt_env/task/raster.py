@@ -89,23 +89,6 @@ def _pixel_centres(centre: np.ndarray, scale: float, size: int) -> np.ndarray:
     return np.column_stack([x, z])
 
 
-def _in_strips(points: np.ndarray, pads: np.ndarray, half: float) -> np.ndarray:
-    """Which ``points`` (n, 2) lie in any pad's rectangle: ``half`` either side of the
-    pad's segment, flat ends at its ends (the strip of ``scoring._touches_strip``)."""
-    hit = np.zeros(len(points), dtype=bool)
-    for a, b in pads:
-        e = b - a
-        length = float(np.hypot(*e))
-        if length == 0.0:
-            continue
-        e = e / length
-        d = points - a
-        u = d @ e
-        v = d[:, 1] * e[0] - d[:, 0] * e[1]
-        hit |= (u >= 0.0) & (u <= length) & (np.abs(v) <= half)
-    return hit
-
-
 def image_observation(size: int, extent: float, trace_xz: np.ndarray, n0: int,
                       target: np.ndarray, target_done: np.ndarray | None,
                       rod_xz: np.ndarray,
@@ -131,7 +114,7 @@ def image_observation(size: int, extent: float, trace_xz: np.ndarray, n0: int,
             img[..., 2].flat[inside] = KEEPOUT_VALUE
         if len(route.pads):
             if route.pad_width > 0.0:
-                strips = _in_strips(centres, route.pads, 0.5 * route.pad_width)
+                strips = geometry.in_pad_strips(centres, route.pads, 0.5 * route.pad_width)
                 img[..., 2].flat[strips] = PAD_VALUE
             for pad in route.pads:
                 draw(img, px(pad), PAD_VALUE, channel=2)
