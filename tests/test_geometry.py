@@ -101,20 +101,18 @@ def test_length_in_polygons_closed_forms() -> None:
     assert length_in_polygons(across, *pack(())) == 0.0
 
 
-def test_a_pads_electrode_is_one_rectangle_to_the_plot_the_image_and_the_score() -> None:
-    """The rectangle drawn (pad_rectangle), the points the image fills (in_pad_strips)
-    and the points where a short trace segment touches the pad in the score
-    (scoring._touches_strip) are one strip: the same answer at random points of a
-    slanted pad; the corners at its ends and half-width."""
-    from cnt_env.task.geometry import in_pad_strips, inside_polygon, pad_rectangle
+def test_a_pads_electrode_is_one_strip_to_the_image_and_the_score() -> None:
+    """The points the image fills as a pad's electrode (in_pad_strips) and the points
+    where a short trace segment touches the pad in the score (scoring._touches_strip)
+    are one strip, the rectangle of the pad's segment widened by half its width either
+    side: the same answer at random points around a slanted pad."""
+    from cnt_env.task.geometry import in_pad_strips, inside_polygon
     from cnt_env.task.scoring import _touches_strip
 
     a, b, half = np.array([3.0, -2.0]), np.array([11.0, 4.0]), 1.5  # length 10
-    rect = pad_rectangle(a, b, half)
     e = (b - a) / 10.0
-    d = rect - a  # the corners in the pad's frame: along it at 0, 10, 10, 0; across +-half
-    np.testing.assert_allclose(d @ e, [0.0, 10.0, 10.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(d[:, 1] * e[0] - d[:, 0] * e[1], [half, half, -half, -half])
+    off = half * np.array([-e[1], e[0]])
+    rect = np.array([a + off, b + off, b - off, a - off])
     rng = np.random.default_rng(4)
     pts = rng.uniform([-2.0, -8.0], [16.0, 10.0], (4000, 2))
     mine = in_pad_strips(pts, np.array([[a, b]]), half)

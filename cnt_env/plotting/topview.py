@@ -272,9 +272,9 @@ def draw_route(
     for i, pad in enumerate(pads):
         xz = _xz(pad)
         if pad_width > 0 and len(xz) == 2:  # the electrode: a rectangle along the pad
-            from cnt_env.task.geometry import pad_rectangle
-
-            rect = pad_rectangle(xz[0], xz[1], 0.5 * float(pad_width))
+            d = xz[1] - xz[0]
+            off = 0.5 * float(pad_width) * np.array([-d[1], d[0]]) / float(np.hypot(*d))
+            rect = np.array([xz[0] + off, xz[1] + off, xz[1] - off, xz[0] - off])
             ax.fill(rect[:, 0], rect[:, 1], color=rgb01("pad"), alpha=0.3, lw=0, zorder=0.65)
         _line(ax, "pad", xz, lw=3 * lw, zorder=0.7, label=i == 0)
     if len(target_xz):

@@ -16,10 +16,10 @@ follower (its plan around keep-outs).
 * :func:`segments_cross` / :func:`segment_distance`: whether two segments properly cross,
   and the distance between them (0 when they meet); used to check a route's parts
   against one another (``routes.Route``);
-* :func:`pad_rectangle` / :func:`in_pad_strips`: a pad's electrode (the strip within a
-  half-width of its segment, flat ends), as drawn (plotting) and as the image shows it
-  (raster); the score's compiled test of a trace segment entering it is
-  ``scoring._touches_strip``.
+* :func:`in_pad_strips`: the points in a pad's electrode (the strip within a half-width
+  of its segment, flat ends), as the image shows it (raster); the score's compiled test
+  of a trace segment entering it is ``scoring._touches_strip``, and the top view
+  (``plotting.topview``, a lower layer) draws its corners.
 """
 
 from __future__ import annotations
@@ -39,7 +39,6 @@ __all__ = [
     "nearest_on_polygons",
     "outward_normal",
     "pack",
-    "pad_rectangle",
     "segment_distance",
     "segments_cross",
 ]
@@ -223,30 +222,16 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
     return min(_point_segment_distance(*pair) for pair in pairs)
 
 
-def _strip_frame(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
-    """The unit direction of the pad a -> b and its length (0: no direction)."""
-    e = np.asarray(b, dtype=float) - np.asarray(a, dtype=float)
-    length = float(np.hypot(*e))
-    return (e / length if length > 0.0 else e), length
-
-
-def pad_rectangle(a: np.ndarray, b: np.ndarray, half: float) -> np.ndarray:
-    """The (4, 2) corners of the pad a-b's electrode: the points within ``half`` of the
-    segment with flat ends at a and b (a, b on one side, then b, a on the other)."""
-    e, _ = _strip_frame(a, b)
-    off = half * np.array([-e[1], e[0]])
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return np.array([a + off, b + off, b - off, a - off])
-
-
 def in_pad_strips(points: np.ndarray, pads: np.ndarray, half: float) -> np.ndarray:
     """Which ``points`` (n, 2) lie in any pad's electrode (pads (p, 2, 2)): along the pad
     within [0, length], across it within ``half`` (edges included)."""
     hit = np.zeros(len(points), dtype=bool)
     for a, b in pads:
-        e, length = _strip_frame(a, b)
+        e = b - a
+        length = float(np.hypot(*e))
         if length == 0.0:
             continue
+        e = e / length
         d = points - a
         u = d @ e
         v = d[:, 1] * e[0] - d[:, 0] * e[1]
