@@ -655,6 +655,37 @@ def test_baseline_cache_key_follows_the_simulator(monkeypatch: pytest.MonkeyPatc
     assert evaluate._baselines_code() != before
 
 
+def test_a_run_pins_the_physics_its_envs_ran_where_the_config_left_the_default(
+    tmp_path: Path,
+) -> None:
+    """The run's config.yml and the model's .yml name the drag law and delta_bar the envs
+    resolved: the env's defaults where the config gives none, the config's own where it
+    does; the model then loads with the physics it trained on."""
+    import gymnasium as gym
+    import yaml
+
+    from cnt_env.presets import MODEL
+    from training.train import train
+
+    runs = {
+        "default": {**tiny_config(), "n_timesteps": 64},
+        "printed": {**tiny_config(), "n_timesteps": 64,
+                    "env_kwargs": {**SMALL, "drag_law": "printed", "delta_bar": 1.0}},
+    }  # fmt: skip
+    env = gym.make("CNTDeposit-v0", **SMALL)
+    resolved = float(env.unwrapped.params.delta_bar)
+    env.close()
+    assert resolved != 1.0 and MODEL["drag_law"] != "printed"  # the two runs differ
+    for name, config in runs.items():
+        model = train("ppo", config, tmp_path / name, seed=0, progress_bar=False)
+        for path in (model.with_suffix(".yml"), model.parent / "config.yml"):
+            kw = yaml.safe_load(path.read_text())["CNTDeposit-v0"]["env_kwargs"]
+            want = (MODEL["drag_law"], resolved) if name == "default" else ("printed", 1.0)
+            assert (kw["drag_law"], kw["delta_bar"]) == want, (name, path.name)
+            assert {k: kw[k] for k in SMALL} == SMALL  # the rest as given
+    assert "drag_law" not in runs["default"]["env_kwargs"]  # the caller's config untouched
+
+
 def test_a_residual_model_pins_its_base_options(tmp_path: Path) -> None:
     """A residual run writes every option of its base follower beside the model, and the
     model loads with them: a later change of the follower's defaults does not change the

@@ -297,13 +297,17 @@ def train(
         stem = vecnormalize_path(model_path)
         normalizer.save(str(stem))  # VecNormalize's own format (pickle), VecNormalize.load
         save_vecnormalize(normalizer, stem)  # npz + JSON, what policies.load_policy reads
+    physics = {  # the drag law and mesh the envs resolved (pin_physics)
+        "drag_law": str(venv.get_attr("config", [0])[0].drag_law),
+        "delta_bar": float(venv.get_attr("params", [0])[0].delta_bar),
+    }
     venv.close()
     wall = time.perf_counter() - t_start
 
     _write_learning_curve(run)
     resolved = {
         # a residual agent's config pins its base's options (policies/residual.py)
-        ENV_ID: to_jsonable(pin_base(config, score_mode)),
+        ENV_ID: to_jsonable(pin_physics(pin_base(config, score_mode), physics)),
         "run": {
             "algo": algo,
             "seed": seed,
@@ -418,6 +422,19 @@ def _checkpoint_callback(base):
             return ok
 
     return Checkpoint
+
+
+def pin_physics(entry: dict[str, Any], physics: dict[str, Any]) -> dict[str, Any]:
+    """A copy of the config entry ``entry`` whose ``env_kwargs`` hold the drag law and
+    ``delta_bar`` the training envs ran (``physics``) where it left them to the env's
+    defaults: written beside a trained model (and in the run's ``config.yml``), so that
+    a later change of the env's default physics changes neither the env the model loads
+    with nor what the run's record says it trained on (the runs of 2026-11-25/26 predate
+    the pin, and their configs read as the model law, which they were not)."""
+    kwargs = dict(entry.get("env_kwargs") or {})
+    for key, value in physics.items():
+        kwargs.setdefault(key, value)
+    return {**entry, "env_kwargs": kwargs}
 
 
 def _write_learning_curve(run: Path) -> None:
