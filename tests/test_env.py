@@ -951,6 +951,28 @@ def test_route_episode_truncates_at_its_length_and_completes(rkw: dict) -> None:
     assert term and info["completed"] and info["is_success"] and k < n
 
 
+def test_a_route_completed_through_a_keep_out_ends_but_is_no_success(rkw: dict) -> None:
+    """Completion terminates; ``is_success`` also asks for no short. The small rod lays
+    its trace along +x at z = 0; the route goes down 1 and along x = 0..3 at z = -1 (its
+    corridor holds the trace), and a keep-out over x in [1, 2] beside the route's leg lies
+    on the trace. Without the keep-out the same episode is a success."""
+    env = CNTDepositEnv(**rkw)
+    route = {"waypoints": [[0.0, 0.0], [0.0, -1.0], [3.0, -1.0]]}
+    keep = [[1.0, -0.5], [2.0, -0.5], [2.0, 0.5], [1.0, 0.5]]
+    seen = {}
+    for name, target in (("clear", route), ("keep-out", dict(route, keepouts=[keep]))):
+        env.reset(seed=0, options={"target": target})
+        term = trunc = False
+        while not (term or trunc):
+            _, _, term, trunc, info = env.step(np.array([1.0, 0.0], np.float32))
+        assert term and not trunc and info["completed"], name
+        seen[name] = info
+    assert seen["clear"]["is_success"] and seen["clear"]["short_length"] == 0.0
+    bad = seen["keep-out"]
+    assert bad["short_length"] > 0 and bad["shorts"] > 0 and not bad["is_success"]
+    assert 0.0 < bad["score"] < seen["clear"]["score"]
+
+
 def test_route_families_draw_deterministically(rkw: dict) -> None:
     from cnt_env.task import routes
 

@@ -211,6 +211,39 @@ def test_a_wire_thinner_than_the_node_spacing_is_a_short(spacing: float) -> None
         assert m["shorts"] == 0  # no node inside: counted per node, no short at all
 
 
+def test_success_is_a_working_circuit_not_just_a_completed_route() -> None:
+    """``succeeded`` (the env's ``info["is_success"]``): completed, every pad met, no
+    trace in a keep-out. Each of the three alone makes it fail, including a short only a
+    segment makes (the wire thinner than the node spacing: ``shorts`` 0, length > 0)."""
+    from cnt_env.task.routes import rectangle
+    from cnt_env.task.scoring import RouteScore
+
+    line = np.array([[0.0, 0.0], [40.0, 0.0]])
+    pad = np.array([[[20.0, -5.0], [20.0, 5.0]]])
+    clean = _along(line)
+
+    def success(trace: np.ndarray, pads: np.ndarray, keep: tuple) -> bool:
+        score = RouteScore(line, 20.0, pads, keep)
+        m = score.update(trace, len(trace))
+        assert m["completed"] == (trace[-1, 0] >= 40.0)
+        return score.succeeded(m)
+
+    assert success(clean, pad, ())
+    assert not success(_along(np.array([[0.0, 0.0], [30.0, 0.0]])), pad, ())  # not completed
+    beside = np.array([[[20.0, 8.0], [20.0, 15.0]]])  # a pad the straight trace passes by
+    assert not success(clean, beside, ())
+    assert success(clean, np.zeros((0, 2, 2)), (rectangle(10.0, 2.0, 30.0, 8.0),))  # clear
+    assert not success(clean, pad, (rectangle(10.0, -1.0, 12.0, 8.0),))  # a short
+    wire = (rectangle(19.85, -30.0, 20.15, 30.0),)  # between the nodes x = 19.80, 20.51
+    diag = _along(np.array([[0.0, -20.0], [40.0, 20.0]]), 1.0)
+    m = RouteScore(line, 20.0, np.zeros((0, 2, 2)), wire).update(diag, len(diag))
+    assert m["completed"] and m["shorts"] == 0 and m["short_length"] > 0
+    assert not RouteScore.succeeded(m)
+    # the thin score: success is its termination, the end covered
+    assert ThinScore.succeeded(ThinScore(LINE, 2.0).update(_along(LINE), 11))
+    assert not ThinScore.succeeded(ThinScore(LINE, 2.0).update(_along(LINE * 0.5), 6))
+
+
 # ---- pads as electrode strips (Route.pad_width) --------------------------------------------
 
 PAD_ALONG_Z = np.array([[[20.0, -10.0], [20.0, 10.0]]])  # across a run along x

@@ -15,9 +15,10 @@ model; a training config gives the fast surrogate the agents were trained on) an
 writes, in ``--out``:
 
 * ``episodes.csv``: one row per episode (final score Φ, its terms, mean distance,
-  length laid, steps, success, failure, wall time);
+  length laid, steps, success, failure, wall time; success is ``info["is_success"]``:
+  the route completed with every pad met and no short, docs/task.md);
 * ``results.csv``: per policy and target, and over all targets (``target = ALL``):
-  mean ± std over seeds of the score and its terms, and the normalised score
+  mean ± std over seeds of the score and its terms, the success rate, and the normalised score
   (score - random) / (1 - random) (best possible score = 1). The ``ALL`` row takes,
   per seed, the mean over targets, then mean ± std over seeds;
 * ``results.md``: the same as Markdown tables (for the README);

@@ -207,9 +207,12 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    Termination: the route is completed (thin: the target's end is covered;
-    ``info["is_success"]``), or the simulation failed (``info["failure"]``; the
-    observation stays finite, stepping again repeats the terminal step with reward 0).
+    Termination: the route is completed (``info["completed"]``; thin: the target's end is
+    covered), or the simulation failed (``info["failure"]``; the observation stays finite,
+    stepping again repeats the terminal step with reward 0). ``info["is_success"]`` (read
+    by SB3's Monitor and EvalCallback) is stricter than termination: the route completed
+    with every pad met and no trace in a keep-out (a completed but shorted route is not a
+    success), and no failure; thin: the end covered.
 
     Truncation: routes end after ``max_episode_steps`` (set at reset,
     :meth:`episode_steps_for`): 1.5 · route length / (``routes.PROGRESS_RATE`` = 0.17
@@ -694,7 +697,7 @@ class CNTDepositEnv(gym.Env[np.ndarray, np.ndarray]):
             flow_phi=float(self._flow[1]),
             target=self.target.name,
             target_length=self._target_length,
-            is_success=self._done(metrics) and self._failure is None,
+            is_success=self._score.succeeded(metrics) and self._failure is None,
             physics_steps=int(physics_steps),
             newton_iterations=int(newton_iterations),
         )

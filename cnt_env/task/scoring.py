@@ -145,6 +145,11 @@ class ThinScore:
             "n_laid": n_laid,
         }  # fmt: skip
 
+    @staticmethod
+    def succeeded(metrics: dict[str, Any]) -> bool:
+        """The target is laid: its end point is covered (the env's termination)."""
+        return bool(metrics["covered_end"])
+
     def potentials(self, metrics: dict[str, Any]) -> np.ndarray:
         """The weighted terms (w_c C, w_p P, w_g G); Φ is their sum."""
         return self.weights * np.array([metrics[k] for k in THIN_TERMS])
@@ -378,6 +383,18 @@ class RouteScore:
             "mean_distance": (self._dist_sum + dsum) / n_laid if n_laid else 0.0,
             "n_laid": n_laid,
         }
+
+    @staticmethod
+    def succeeded(metrics: dict[str, Any]) -> bool:
+        """The circuit works: the route is completed, every pad is met and no trace lies
+        in a keep-out (a short). Completion alone ends the episode; a route completed
+        through a keep-out or past a pad is not a success (its score says by how much)."""
+        return bool(
+            metrics["completed"]
+            and metrics["pads_crossed"] == metrics["n_pads"]
+            and metrics["shorts"] == 0
+            and metrics["short_length"] == 0.0
+        )
 
     def potentials(self, metrics: dict[str, Any]) -> np.ndarray:
         """The terms of Φ in the order of :data:`ROUTE_TERMS`; Φ is their sum."""
