@@ -35,12 +35,13 @@ from cnt_env.task.scoring import route_score
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ROOTS = (ROOT / "training" / "results", ROOT / "benchmarks" / "results")
+NEEDED = ("episodes.json", "traces.npz", "summary.json")  # what cnt-evaluate wrote
 
 
 def result_dirs(roots: Sequence[Path]) -> list[Path]:
-    """Every directory under ``roots`` with ``episodes.json`` and ``traces.npz``."""
+    """Every directory under ``roots`` with the files of :data:`NEEDED`."""
     found = {p.parent for r in roots for p in r.rglob("traces.npz")}
-    return sorted(d for d in found if (d / "episodes.json").is_file())
+    return sorted(d for d in found if all((d / f).is_file() for f in NEEDED))
 
 
 def rescore(path: Path, tolerance: float) -> tuple[list[dict[str, Any]], list[str]]:
@@ -81,7 +82,7 @@ def rescore(path: Path, tolerance: float) -> tuple[list[dict[str, Any]], list[st
             problems.append(f"{where}: score {phi:.6f} from the trace, {row['score']:.6f} "
                             f"recorded")  # fmt: skip
             continue
-        if not failed and m["completed"] != row["is_success"] and row["is_success"]:
+        if row["is_success"] and not m["completed"]:  # either meaning implies completed
             problems.append(f"{where}: recorded a success the trace does not complete")
             continue
         out.append(dict(row, is_success=bool(score.succeeded(m)) and not failed))
@@ -157,9 +158,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )  # fmt: skip
     args = ap.parse_args(argv)
     dirs = args.dirs or result_dirs(DEFAULT_ROOTS)
-    missing = [d for d in dirs if not (d / "traces.npz").is_file()]
-    if missing:
-        ap.error(f"no traces.npz in {', '.join(map(str, missing))}: it cannot be re-scored")
+    for d in dirs:
+        lacking = [f for f in NEEDED if not (d / f).is_file()]
+        if lacking:
+            ap.error(f"{d} has no {', '.join(lacking)}: it cannot be re-scored")
     status = 0
     for d in dirs:
         rows, problems = rescore(d, args.tolerance)
