@@ -106,18 +106,13 @@ def test_a_dir_without_traces_is_a_usage_error(tmp_path: Path) -> None:
     assert exc.value.code == 2
 
 
-def test_the_committed_tables_hold_todays_success() -> None:
+def test_the_committed_tables_hold_todays_scores_and_success() -> None:
     """Every committed table with traces reproduces its scores from them and already
-    holds the re-scored flags, save ``width_or_shape/hard_wide`` (its one short was
-    scored per node, before the short was measured in length: benchmarks/RESULTS.md)."""
-    stale = {"hard_wide"}
+    holds the re-scored flags: a table made before a change of the score fails here."""
     dirs = rescore_success.result_dirs(rescore_success.DEFAULT_ROOTS)
     assert len(dirs) >= 13
     for d in dirs:
         rows, problems = rescore_success.rescore(d, 1e-3)
-        if d.name in stale:
-            assert len(problems) == 1 and "s1002_detour seed 1" in problems[0], problems
-            continue
         assert not problems, problems
         old = json.loads((d / "episodes.json").read_text())
         assert [r["is_success"] for r in rows] == [r["is_success"] for r in old], d
