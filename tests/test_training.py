@@ -291,6 +291,16 @@ def test_evaluate_routes_with_the_follower(tmp_path: Path) -> None:
         assert 0.0 <= r["score_mean"] <= 1.0
 
 
+def test_csv_columns_are_every_key_and_a_reused_row_may_lack_the_newer(tmp_path) -> None:
+    from training.evaluate import _write_csv
+
+    _write_csv(tmp_path / "t.csv", [{"a": 1, "b": 0.5}, {"a": 2, "b": 1.0, "c": True}])
+    with (tmp_path / "t.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["a", "b", "c"]
+    assert rows == [{"a": "1", "b": "0.5", "c": ""}, {"a": "2", "b": "1", "c": "True"}]
+
+
 def test_evaluate_on_routes_of_a_route_file(tmp_path: Path) -> None:
     """cnt-evaluate --route-file: every baseline, the constant-flow oracle included, on a
     user's own route, with the route's corridor and keep-out, next to a held-out one."""
@@ -316,6 +326,11 @@ def test_evaluate_on_routes_of_a_route_file(tmp_path: Path) -> None:
     assert {(r["policy"], r["target"]) for r in rows} == {
         (p, t) for p in ("random", "constant", "scripted") for t in ("my_jog", "u_turn")
     }
+    # what is_success asks of a route is in the row: no pads on either route, and no
+    # short, since 3 steps of the small rod lay ~1 L_vb and the keep-out starts at x = 40
+    for r in rows:
+        assert r["n_pads"] == "0" and r["pads_crossed"] == "0"
+        assert float(r["short_length"]) == 0.0
     best = json.loads((out / "constant_best.json").read_text())["best"]
     assert set(best) == {"my_jog", "u_turn"}
     assert (out / "traces_my_jog.png").is_file()

@@ -16,7 +16,9 @@ writes, in ``--out``:
 
 * ``episodes.csv``: one row per episode (final score Φ, its terms, mean distance,
   length laid, steps, success, failure, wall time; success is ``info["is_success"]``:
-  the route completed with every pad met and no short, docs/task.md);
+  the route completed with every pad met and no short, docs/task.md; routes also give
+  ``short_length``, ``pads_crossed`` and ``n_pads``, empty in rows reused from runs
+  before 2026-12-07);
 * ``results.csv``: per policy and target, and over all targets (``target = ALL``):
   mean ± std over seeds of the score and its terms, the success rate, and the normalised score
   (score - random) / (1 - random) (best possible score = 1). The ``ALL`` row takes,
@@ -271,6 +273,9 @@ def run_episode(job: dict[str, Any]) -> dict[str, Any]:
         "steps": steps, "is_success": bool(info["is_success"]),
         "failure": info.get("failure", ""), "wall_s": round(time.perf_counter() - t0, 2),
     }  # fmt: skip
+    if corridor is not None:  # what is_success asks of a route, to audit it by
+        row["short_length"] = float(info["short_length"])
+        row["pads_crossed"], row["n_pads"] = int(info["pads_crossed"]), int(info["n_pads"])
     rec = getattr(env, "paths", None)
     env.close()
     return {
@@ -345,10 +350,13 @@ def constant_search(
 
 
 def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+    """``rows`` as CSV; the columns are every key in the order first seen (a row reused
+    from an older run may lack a newer column: its cell is left empty)."""
     if not rows:
         return
+    fields = list(dict.fromkeys(k for r in rows for k in r))
     with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w = csv.DictWriter(fh, fieldnames=fields)
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
