@@ -32,6 +32,7 @@ import numpy as np
 
 from cnt_env.task import routes
 from cnt_env.task.scoring import route_score
+from training.evaluate import aggregate
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ROOTS = (ROOT / "training" / "results", ROOT / "benchmarks" / "results")
@@ -53,7 +54,8 @@ def rescore(path: Path, tolerance: float) -> tuple[list[dict[str, Any]], list[st
     custom = {k: routes.resolve(v, np.random.default_rng(0))
               for k, v in summary.get("custom_routes", {}).items()}  # fmt: skip
     rows = json.loads((path / "episodes.json").read_text())
-    data = np.load(path / "traces.npz")
+    with np.load(path / "traces.npz") as npz:
+        data = {k: npz[k] for k in npz.files}
     out, problems = [], []
     for i, row in enumerate(rows):
         name = row["target"]
@@ -104,13 +106,13 @@ def _rewrite_csv(path: Path, column: str, value_of) -> str:
 
 
 def success_rates(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str], float]:
-    """Per (policy, target) and (policy, "ALL") the fraction of episodes that succeeded,
-    as ``cnt-evaluate``'s ``aggregate``."""
-    by: dict[tuple[str, str], list[bool]] = {}
-    for r in rows:
-        by.setdefault((r["policy"], r["target"]), []).append(bool(r["is_success"]))
-        by.setdefault((r["policy"], "ALL"), []).append(bool(r["is_success"]))
-    return {k: float(np.mean(v)) for k, v in by.items()}
+    """Per (policy, target) and (policy, "ALL") the ``success_rate`` of ``rows``, from
+    ``cnt-evaluate``'s own table (:func:`training.evaluate.aggregate`)."""
+    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    targets = list(dict.fromkeys(r["target"] for r in rows))
+    seeds = sorted({r["seed"] for r in rows})
+    table = aggregate(rows, policies, targets, seeds)
+    return {(t["policy"], t["target"]): t["success_rate"] for t in table}
 
 
 def recorded_rates_differ(path: Path, rows: Sequence[dict[str, Any]]) -> str:
