@@ -12,6 +12,7 @@ and another on routes with one (``'a|b'``).
 
 from pathlib import Path
 
+from . import mkl  # noqa: F401  (first: pins MKL's code path before torch runs)
 from .base import ConstantPolicy, Policy, RandomPolicy, action_from_flow
 from .ensemble import KeepoutSplit, MeanPolicy
 from .route_follower import RouteFollower

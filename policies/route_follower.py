@@ -171,6 +171,7 @@ from collections import deque
 
 import numpy as np
 
+from cnt_env import numerics
 from cnt_env.task.geometry import inside_polygon, nearest_on_boundary, outward_normal
 from cnt_env.task.spaces import action_from_flow
 from cnt_env.task.targets import resample
@@ -377,7 +378,7 @@ class RouteFollower:
             n_away = away / dist
             band = half
             if self.observed_band:
-                band = max(band, float(np.max(np.abs((past - centre) @ n_away))))
+                band = max(band, float(np.max(np.abs(numerics.rows_dot(past - centre, n_away)))))
             reach = band + self.clearance
             if dist < reach and reach - dist > intrusion:
                 intrusion, push = reach - dist, n_away
@@ -496,7 +497,7 @@ class RouteFollower:
         n = math.hypot(*t)
         if n > 1e-9:
             t = t / n
-            across = (centre - ahead[j0]) @ np.array([-t[1], t[0]])
+            across = numerics.dot(centre - ahead[j0], np.array([-t[1], t[0]]))
             aim = aim - self.gain * across * np.array([-t[1], t[0]])
         if planned is None:  # the plan replaces the repulsion
             aim = aim + self.repulsion_from(keep, centre, aim, past, vbar)
@@ -581,7 +582,7 @@ def plan_around(points: np.ndarray, keepouts, reach: np.ndarray, sweeps: int = 3
             n[inside] *= -1.0
             for i in np.flatnonzero(dist <= 1e-9):  # on the boundary: its outward normal
                 n[i] = outward_normal(out[i], poly)
-            r = np.abs(n) @ reach
+            r = numerics.rows_dot(np.abs(n), reach)
             move = inside | (dist < r)
             out[move] = near[move] + r[move, None] * n[move]
     return out

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cnt_env import numerics
 from cnt_env.task.spaces import action_from_flow
 
 from .base import option_defaults, require_vector_observation, vector_part
@@ -117,7 +118,7 @@ class ScriptedPolicy:
         n = math.hypot(*chord)
         if n > 1e-9:
             normal = np.array([-chord[1], chord[0]]) / n
-            across = (ahead - ahead[0]) @ normal
+            across = numerics.rows_dot(ahead - ahead[0], normal)
             half_width = 0.5 * float(across.max() - across.min())
         else:
             half_width = 0.0

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
+from cnt_env import numerics
 from cnt_env.presets import FLOW_PROFILES, MODEL, NEWTON, STEP_HBAR_CAP
 from cnt_env.sim.forces import (
     ADHESION_MODELS,
@@ -360,15 +361,15 @@ class DepositionSim:
         e = q[b : b + 3] - q[a : a + 3]
         prev = q[a : a + 3] - q[a - 4 : a - 1]
         prev[1] = 0.0
-        h = float(np.dot(e, prev) / np.linalg.norm(prev))
+        h = numerics.dot(e, prev) / numerics.norm(prev)
         return math.atan2(e[1], h)
 
     # ---- deposition, injection, deletion ------------------------------------------
     def _deposit(self, node: int) -> None:
         assert node == self.n_deposited
         i = 4 * node
-        self.sticking_loss += 0.5 * float(
-            np.dot(self.rod.mass[i : i + 3], self.rod.u[i : i + 3] ** 2)
+        self.sticking_loss += 0.5 * numerics.dot(
+            self.rod.mass[i : i + 3], self.rod.u[i : i + 3] ** 2
         )
         self.substrate.deposit(self.rod, node)
         if node >= 1:
@@ -417,7 +418,7 @@ class DepositionSim:
             if top[1] >= self.params.Hbar - self.inject_delta:
                 return
             prev = rod.q[4 * (n - 2) : 4 * (n - 2) + 3]
-            t = (top - prev) / np.linalg.norm(top - prev)
+            t = (top - prev) / numerics.norm(top - prev)
             d = self.inject_delta
             if n >= self.config.max_nodes:
                 raise SimulationError(

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from cnt_env import numerics
 from cnt_env.rod import elastic, frames
 from cnt_env.rod.banded import (
     KL,
@@ -860,11 +861,11 @@ class Rod:
         self.sub_friction[i - 1 : i + 3] = 0.0
         self.sub_stiffness[i - 1 : i + 3] = 0.0
         e = np.asarray(position, dtype=np.float64) - self.q[i - 4 : i - 1]
-        t_new = e / np.linalg.norm(e)
+        t_new = e / numerics.norm(e)
         frames.parallel_transport(self.d1_old[j - 1], self.tangents_old[j - 1], t_new,
                                   self.d1_old[j])  # fmt: skip
-        self.d1_old[j] -= self.d1_old[j].dot(t_new) * t_new
-        self.d1_old[j] /= np.linalg.norm(self.d1_old[j])
+        self.d1_old[j] -= numerics.dot(self.d1_old[j], t_new) * t_new
+        self.d1_old[j] /= numerics.norm(self.d1_old[j])
         self.tangents_old[j] = t_new
         self.rest_lengths[j] = rest_length
         self.drag_on[j] = 1
@@ -1006,7 +1007,7 @@ class Rod:
 
     def kinetic_energy(self) -> float:
         nd = self.n_dof
-        return 0.5 * float(np.dot(self.mass[:nd], self.u[:nd] ** 2))
+        return 0.5 * numerics.dot(self.mass[:nd], self.u[:nd] ** 2)
 
     # ---- stepping -------------------------------------------------------------
     def _try_step(self, dt: float) -> int:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from cnt_env import numerics
 from cnt_env.sim.stepper import Rod
 
 SLIDING_OPTIONS = ("B", "C", "none")
@@ -202,7 +203,7 @@ class Stepped:
                 continue
             a, b = 4 * k, 4 * (k + 1)
             e = q[b : b + 3] - q[a : a + 3]
-            if sz * e[2] / np.linalg.norm(e) < limit:
+            if sz * e[2] / numerics.norm(e) < limit:
                 return True
         return False
 

@@ -29,6 +29,8 @@ import math
 import numpy as np
 from numba import njit
 
+from cnt_env import numerics
+
 __all__ = [
     "FAR",
     "in_pad_strips",
@@ -208,8 +210,8 @@ def segments_cross(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarra
 def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """The distance from point p to segment a-b (a == b allowed)."""
     ab = b - a
-    den = float(ab @ ab)
-    t = 0.0 if den == 0.0 else min(max(float((p - a) @ ab) / den, 0.0), 1.0)
+    den = numerics.dot(ab, ab)
+    t = 0.0 if den == 0.0 else min(max(numerics.dot(p - a, ab) / den, 0.0), 1.0)
     return float(np.hypot(*(a + t * ab - p)))
 
 
@@ -233,7 +235,7 @@ def in_pad_strips(points: np.ndarray, pads: np.ndarray, half: float) -> np.ndarr
             continue
         e = e / length
         d = points - a
-        u = d @ e
+        u = numerics.rows_dot(d, e)
         v = d[:, 1] * e[0] - d[:, 0] * e[1]
         hit |= (u >= 0.0) & (u <= length) & (np.abs(v) <= half)
     return hit

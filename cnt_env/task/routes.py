@@ -64,6 +64,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cnt_env import numerics
 from cnt_env.task import targets as targets_mod
 from cnt_env.task.geometry import (
     inside_polygon,
@@ -254,10 +255,10 @@ def _through_vertices(a: FloatArray, b: FloatArray, poly: FloatArray) -> bool:
     corner to corner of a rectangle crosses no edge properly): the midpoints between
     the leg's ends and the vertices on it, tested for insideness."""
     ab = b - a
-    length2 = float(ab @ ab)
+    length2 = numerics.dot(ab, ab)
     if length2 == 0.0:  # a repeated waypoint: its point was tested with the waypoints
         return False
-    t = (poly - a) @ ab / length2
+    t = numerics.rows_dot(poly - a, ab) / length2
     off = np.abs((poly[:, 0] - a[0]) * ab[1] - (poly[:, 1] - a[1]) * ab[0]) / math.sqrt(length2)
     on = t[(off <= 1e-9 * (1.0 + math.sqrt(length2))) & (t > 0.0) & (t < 1.0)]
     if on.size == 0:
@@ -353,7 +354,9 @@ def _detour(rng: np.random.Generator, d: float) -> Route:
     keep = rectangle(kx0, kz[0], kx1, kz[1]) if kz[1] - kz[0] > 1 else rectangle(kx0, -2, kx1, 2)
     h = _axis_heading(rng)
     p = {"lead": lead, "block": block, "offset": off, "side": side, "heading": h}
-    return Route(_rot(pts, h), w, keepouts=(_rot(keep, h),), name="detour", params=p)
+    return Route(
+        numerics.rotate(pts, h), w, keepouts=(numerics.rotate(keep, h),), name="detour", params=p
+    )
 
 
 def _arc(rng: np.random.Generator, d: float) -> Route:
@@ -389,11 +392,6 @@ def _band(rng: np.random.Generator, d: float) -> Route:
          "heading": 0.0 if rng.integers(2) else math.pi}  # fmt: skip
     w = ROUTE_SCALE * float(rng.uniform(15.0, 20.0))
     return Route(targets_mod.straight_points(**p), w, name="band", params=p)
-
-
-def _rot(points: FloatArray, heading: float) -> FloatArray:
-    c, s = math.cos(heading), math.sin(heading)
-    return np.asarray(points, dtype=float) @ np.array([[c, s], [-s, c]])
 
 
 #: Training families: name -> draw(rng, difficulty) -> Route.

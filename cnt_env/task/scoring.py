@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from cnt_env import numerics
 from cnt_env.patterns import MeasureOptions, measure
 from cnt_env.task import geometry
 from cnt_env.task import targets as targets_mod
@@ -135,7 +136,7 @@ class ThinScore:
         n_in = self._n_in_frozen + int(np.count_nonzero(d_tail <= tol))
         hit = np.flatnonzero(cov)
         return {
-            "coverage": float(np.dot(self.sample_w, cov)),
+            "coverage": numerics.dot(self.sample_w, cov),
             "precision": n_in / n_laid if n_laid > 0 else 0.0,
             "progress": float(self.sample_s[hit[-1]] / self.length) if hit.size else 0.0,
             "furthest": float(self.sample_s[hit[-1]]) if hit.size else 0.0,
@@ -379,7 +380,7 @@ class RouteScore:
             "outside": (n_laid - n_in) / n_laid if n_laid else 0.0,
             "shorts": n_short,
             "short_length": self._short_len + s_len,
-            "coverage": float(np.dot(self.sample_w, cov)),
+            "coverage": numerics.dot(self.sample_w, cov),
             "mean_distance": (self._dist_sum + dsum) / n_laid if n_laid else 0.0,
             "n_laid": n_laid,
         }

@@ -45,6 +45,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from cnt_env import numerics
 from cnt_env.patterns import arc_length
 
 __all__ = [
@@ -216,11 +217,6 @@ def mark_covered(samples: FloatArray, points: FloatArray, tol: float, hit: np.nd
                 break
 
 
-def _rotate(points: FloatArray, heading: float) -> FloatArray:
-    c, s = math.cos(heading), math.sin(heading)
-    return points @ np.array([[c, s], [-s, c]])
-
-
 def _arc(start: FloatArray, heading: float, radius: float, sweep: float) -> FloatArray:
     """Points of a circular arc from ``start`` (excluded) leaving along ``heading``;
     ``sweep`` > 0 turns counter-clockwise in (x, z)."""
@@ -284,7 +280,7 @@ def serpentine_points(
     # end in the middle of the last run, where it started (in z)
     last = pts.pop()
     pts.append(np.array([[last[0, 0], last[0, 1] - direction * run / 2.0]]))
-    return _rotate(np.concatenate(pts), heading)
+    return numerics.rotate(np.concatenate(pts), heading)
 
 
 def smooth_points(
