@@ -12,9 +12,10 @@ SSE4_2) with ``MKL_CBWR=COMPATIBLE`` (tests/test_numerics.py). That branch is MK
 Importing :mod:`policies` sets ``MKL_CBWR=COMPATIBLE`` unless the variable is already
 set (``MKL_CBWR=AUTO`` restores MKL's own choice). MKL reads it at its first call, so it
 takes effect only if nothing in the process ran a torch matrix product before; import
-``policies`` (or ``cnt_env``'s CLIs, which do) first. The cost: a PPO minibatch step of
-the shipped network (84-64-64-2, batch 128) takes ~0.93 ms against ~0.75 ms, a single
-action ~28 µs against ~30 µs; the simulator's ~30 ms per control step dominates both.
+``policies`` first (``cnt-train`` and ``cnt-evaluate`` do). The cost: a PPO minibatch
+step of the shipped network (84-64-64-2, batch 128) takes ~0.93 ms against ~0.75 ms, a
+single action ~28 µs against ~30 µs; a control step of the simulator (~70 ms on the
+surrogate, ~450 ms on the model) dominates both.
 """
 
 from __future__ import annotations
