@@ -497,8 +497,8 @@ class RouteFollower:
         n = math.hypot(*t)
         if n > 1e-9:
             t = t / n
-            across = numerics.dot(centre - ahead[j0], np.array([-t[1], t[0]]))
-            aim = aim - self.gain * across * np.array([-t[1], t[0]])
+            normal = np.array([-t[1], t[0]])
+            aim = aim - self.gain * numerics.dot(centre - ahead[j0], normal) * normal
         if planned is None:  # the plan replaces the repulsion
             aim = aim + self.repulsion_from(keep, centre, aim, past, vbar)
         if math.hypot(*aim) < 1e-9:

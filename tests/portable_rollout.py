@@ -1,13 +1,14 @@
-"""A short rollout or training run printed as bit digests, for tests/test_numerics.py.
+"""Bit digests of a short rollout, a training update or two matrix products, printed as
+one JSON line for tests/test_numerics.py's subprocesses (each under its own kernels).
 
-``python -m tests.portable_rollout [agent]``: the default env, held-out ``detour_block``,
-seed 0, from a cold warm-state cache (``$CNT_ENV_CACHE_DIR``), played by the route follower
-or by the shipped residual agent for a few control steps. Prints one JSON line: the
-digest of every observation and action, and two canaries that show which BLAS and MKL
-code paths the process runs (the digests of a NumPy and a torch matrix product).
-
-``python -m tests.portable_rollout train DIR``: the demo's residual PPO recipe for one
-update (512 samples, seed 0) into DIR; prints the digest of the trained weights."""
+* ``python -m tests.portable_rollout``: the shipped residual agent (its follower base,
+  the default env, torch) on held-out ``detour_block``, seed 0, from a cold warm-state
+  cache (``$CNT_ENV_CACHE_DIR``) for a few control steps: the digest of every
+  observation and action, and the canaries;
+* ``python -m tests.portable_rollout train DIR``: the demo's residual PPO recipe for one
+  update (512 samples, seed 0) into DIR: the digest of the trained weights;
+* ``python -m tests.portable_rollout canary``: the canaries alone, the digests of a NumPy
+  and a torch matrix product, which show the BLAS and MKL code paths the process runs."""
 
 from __future__ import annotations
 
@@ -22,33 +23,27 @@ import policies  # first: pins MKL's code path (policies/mkl.py)
 STEPS = 3
 
 
-def digest(a: np.ndarray) -> str:
-    return hashlib.sha1(np.ascontiguousarray(a).tobytes()).hexdigest()[:16]
+def digest(a: np.ndarray | bytes) -> str:
+    data = a if isinstance(a, bytes) else np.ascontiguousarray(a).tobytes()
+    return hashlib.sha1(data).hexdigest()[:16]
 
 
 def canaries() -> dict[str, str]:
+    import torch
+
     x = np.random.default_rng(0).standard_normal((64, 84))
-    out = {"blas": digest(x @ x[0])}
-    if len(sys.argv) > 1 and sys.argv[1] == "agent":
-        import torch
-
-        t = torch.from_numpy(x.astype(np.float32))
-        out["mkl"] = digest((t @ t.T).numpy())
-    return out
+    t = torch.from_numpy(x.astype(np.float32))
+    return {"blas": digest(x @ x[0]), "mkl": digest((t @ t.T).numpy())}
 
 
-def main() -> None:
+def rollout() -> dict[str, object]:
     import gymnasium as gym
 
     import cnt_env  # noqa: F401
 
-    agent = len(sys.argv) > 1 and sys.argv[1] == "agent"
     env = gym.make("CNTDeposit-v0")
     obs, _ = env.reset(seed=0, options={"target": "detour_block"})
-    if agent:
-        pol = policies.load_policy(policies.PRETRAINED_DIR / "ppo_residual.zip", env=env)
-    else:
-        pol = policies.RouteFollower.from_env(env)
+    pol = policies.load_policy(policies.PRETRAINED_DIR / "ppo_residual.zip", env=env)
     pol.reset(0)
     rows = [digest(obs)]
     for _ in range(STEPS):
@@ -56,10 +51,10 @@ def main() -> None:
         obs, _, _, _, _ = env.step(a)
         rows += [digest(a), digest(obs)]
     env.close()
-    print(json.dumps({"rollout": rows, **canaries()}))
+    return {"rollout": rows, **canaries()}
 
 
-def train_one_update(out: str) -> None:
+def train_one_update(out: str) -> dict[str, object]:
     import zipfile
     from pathlib import Path
 
@@ -70,12 +65,15 @@ def train_one_update(out: str) -> None:
     config = short_run_config(load_config(CONFIG_DIR / DEMO_CONFIG), 512)
     train("ppo", config, Path(out), seed=0, max_wall_seconds=600)
     with zipfile.ZipFile(Path(out) / "ppo.zip") as z:
-        weights = z.read("policy.pth")
-    print(json.dumps({"weights": hashlib.sha1(weights).hexdigest()[:16]}))
+        return {"weights": digest(z.read("policy.pth"))}
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 2 and sys.argv[1] == "train":
-        train_one_update(sys.argv[2])
+    mode = sys.argv[1] if len(sys.argv) > 1 else "rollout"
+    if mode == "train":
+        result = train_one_update(sys.argv[2])
+    elif mode == "canary":
+        result = canaries()
     else:
-        main()
+        result = rollout()
+    print(json.dumps(result))

@@ -108,11 +108,12 @@ def _results(procs: list[subprocess.Popen]) -> list[dict]:
     return out
 
 
-MKL_CANARY = (
-    "import hashlib, numpy as np, torch; "
-    "t = torch.from_numpy(np.random.default_rng(0).standard_normal((64, 84)).astype(np.float32)); "
-    "print(hashlib.sha1((t @ t.T).numpy().tobytes()).hexdigest())"
-)
+def _free_mkl(kernels: list[dict[str, str]], tmp_path: Path) -> list[str]:
+    """The MKL canary under each kernel set with MKL's own choice (``MKL_CBWR=AUTO``): the
+    power of a check, since the sets must differ there for the pin to matter."""
+    procs = [_run(["-m", "tests.portable_rollout", "canary"], {"MKL_CBWR": "AUTO", **k},
+                  tmp_path) for k in kernels]  # fmt: skip
+    return [r["mkl"] for r in _results(procs)]
 
 
 def test_a_rollout_has_the_same_bits_under_other_blas_and_mkl_kernels(tmp_path) -> None:
@@ -120,12 +121,10 @@ def test_a_rollout_has_the_same_bits_under_other_blas_and_mkl_kernels(tmp_path) 
     torch) on detour_block, from a cold warm-state cache, under two kernel sets."""
     kernels = [{"OPENBLAS_CORETYPE": "Haswell", "MKL_ENABLE_INSTRUCTIONS": "AVX2"},
                {"OPENBLAS_CORETYPE": "Prescott", "MKL_ENABLE_INSTRUCTIONS": "SSE4_2"}]  # fmt: skip
-    procs = [_run(["-m", "tests.portable_rollout", "agent"], k, tmp_path / f"cache{i}")
+    procs = [_run(["-m", "tests.portable_rollout"], k, tmp_path / f"cache{i}")
              for i, k in enumerate(kernels)]  # fmt: skip
-    # the power of the check: without the pin, MKL's own choice differs between the sets
-    free = [_run(["-c", MKL_CANARY], {"MKL_CBWR": "AUTO", **k}, tmp_path) for k in kernels]
     a, b = _results(procs)
-    free_bits = [p.communicate(timeout=300)[0].strip() for p in free]
+    free_bits = _free_mkl(kernels, tmp_path)
     blas_differs, mkl_differs = a["blas"] != b["blas"], free_bits[0] != free_bits[1]
     if not (blas_differs or mkl_differs):
         pytest.skip("this machine's OpenBLAS and MKL give one result under both kernel sets, "
@@ -146,8 +145,7 @@ def test_training_has_the_same_bits_under_other_kernels(tmp_path) -> None:
     procs = [_run(["-m", "tests.portable_rollout", "train", str(tmp_path / name)], env,
                   tmp_path / f"cache_{name}") for env, name in runs]  # fmt: skip
     own, other = _results(procs)
-    free = [_run(["-c", MKL_CANARY], {"MKL_CBWR": "AUTO", **env}, tmp_path) for env, _ in runs]
-    free_bits = [p.communicate(timeout=300)[0].strip() for p in free]
+    free_bits = _free_mkl([env for env, _ in runs], tmp_path)
     if free_bits[0] == free_bits[1]:
         pytest.skip("MKL runs one code path under both kernel sets on this machine")
     assert own["weights"] == other["weights"]
