@@ -38,6 +38,7 @@ import numpy as np
 
 from cnt_env.task.spaces import ACTION_Z_MIRROR
 
+from .mkl import check as check_mkl
 from .residual import HeadingGate, combine, make_base_policy, observe, residual_settings
 
 __all__ = [
@@ -517,6 +518,7 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
 
     Without ``trust`` nothing is unpickled (module doc); a pickle, a zip entry that
     cannot be rebuilt from data or a manifest mismatch raise :class:`UntrustedModelError`."""
+    check_mkl()
     model_path = Path(model_path)
     algo = algo_of(model_path, algo)
     check_model(model_path, algo, trust)
@@ -543,8 +545,6 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
             from cnt_env.task import CNTDepositEnv
 
             if env is None:
-                import warnings
-
                 warnings.warn(f"{model_path.name} is a residual agent: pass env= (the env it "
                               "acts in) to load_policy, or its base follower cannot see the "
                               "route it was trained to read", stacklevel=2)  # fmt: skip
@@ -552,8 +552,6 @@ def load_policy(model_path: str | Path, algo: str | None = None, device: str = "
                 env_kwargs.pop("max_episode_steps", None)  # gymnasium.make's, not the env's
                 env = CNTDepositEnv(**env_kwargs)
             if "base_kwargs" not in residual:
-                import warnings
-
                 warnings.warn(f"{cfg_path.name} does not pin the options of the residual "
                               "agent's base (a config written before they were pinned): it "
                               "gets today's defaults, which may differ from those it was "

@@ -91,6 +91,16 @@ def test_the_scan_finds_blas() -> None:
     ]
 
 
+#: tests.portable_rollout's digests of the shipped residual agent's first control steps
+#: (observation, then action and observation per step), recorded on an AMD EPYC without
+#: AVX-512 (2026-12-08). The committed held-out table was laid on an Intel Xeon with
+#: AVX-512, and the EPYC lays its episodes to every digit, this one among them
+#: (training/results/route_runs/portable_2026-12-08/).
+RECORDED_ROLLOUT = ["ef013525b35efb35", "2031d37ae3cf7113", "fbc67df571d4b020",
+                    "b77491510386b3aa", "265d8f7596375b64", "b77491510386b3aa",
+                    "ca6420c288087efd"]  # fmt: skip
+
+
 def _run(args: list[str], env_vars: dict[str, str], cache: Path) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items()
            if k not in ("OPENBLAS_CORETYPE", "MKL_ENABLE_INSTRUCTIONS", "MKL_CBWR")}  # fmt: skip
@@ -116,6 +126,24 @@ def _free_mkl(kernels: list[dict[str, str]], tmp_path: Path) -> list[str]:
     return [r["mkl"] for r in _results(procs)]
 
 
+def test_mkl_runs_the_pinned_branch_and_a_late_pin_is_reported(tmp_path) -> None:
+    """policies.mkl.check reads the branch MKL runs: the pinned one when ``policies`` is
+    imported first, and a warning (an error here) when a torch product ran before."""
+    product = "torch.ones(4, 4) @ torch.ones(4, 4)"
+    strict = "import json, warnings; warnings.simplefilter('error'); "
+    first = _run(["-c", f"{strict}import policies, torch; {product}; "
+                        "print(json.dumps(policies.mkl.check()))"], {}, tmp_path)  # fmt: skip
+    late = _run(["-c", f"{strict}import torch; {product}; import policies; "
+                       "print(json.dumps(policies.mkl.check()))"], {}, tmp_path)  # fmt: skip
+    (pinned,) = _results([first])
+    if pinned is None:
+        pytest.skip("torch's library has no MKL service on this machine")
+    assert pinned == "COMPATIBLE"
+    _, stderr = late.communicate(timeout=600)
+    assert late.returncode != 0
+    assert "Import `policies` first" in stderr and "not COMPATIBLE" in stderr
+
+
 def test_a_rollout_has_the_same_bits_under_other_blas_and_mkl_kernels(tmp_path) -> None:
     """The shipped residual agent (its follower base, the simulator, the route task and
     torch) on detour_block, from a cold warm-state cache, under two kernel sets."""
@@ -124,6 +152,10 @@ def test_a_rollout_has_the_same_bits_under_other_blas_and_mkl_kernels(tmp_path) 
     procs = [_run(["-m", "tests.portable_rollout"], k, tmp_path / f"cache{i}")
              for i, k in enumerate(kernels)]  # fmt: skip
     a, b = _results(procs)
+    assert a["rollout"] == RECORDED_ROLLOUT, (
+        "this machine lays other bits than the CPUs that laid the committed held-out table "
+        "(an Intel Xeon, an AMD EPYC): that table will not repeat to the digit here "
+        "(docs/architecture.md, 'Determinism')")  # fmt: skip
     free_bits = _free_mkl(kernels, tmp_path)
     blas_differs, mkl_differs = a["blas"] != b["blas"], free_bits[0] != free_bits[1]
     if not (blas_differs or mkl_differs):

@@ -49,6 +49,7 @@ import numpy as np
 import yaml
 
 from cnt_env.io import to_jsonable
+from policies.mkl import check as check_mkl
 from policies.residual import pin_base, residual_settings
 from policies.sb3 import (
     ALGOS,
@@ -169,6 +170,7 @@ def train(
     ``new_base_options``: the agent goes on over the config's options of its base follower
     even where they differ from those it was trained over (recorded as ``base_kwargs_was``)."""
     limit_threads()
+    mkl_branch = check_mkl()  # the torch products' code path (policies/mkl.py)
     import stable_baselines3
     from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -319,6 +321,7 @@ def train(
             "steps_per_s": round(model.num_timesteps / wall, 2),
             "argv": sys.argv,
             "trained_agent": earlier,
+            "mkl_branch": mkl_branch,
             "versions": {
                 "python": platform.python_version(),
                 "stable_baselines3": stable_baselines3.__version__,
