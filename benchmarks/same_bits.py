@@ -8,33 +8,33 @@ lay the committed held-out table again and compare it with the committed one::
     python benchmarks/same_bits.py OUT training/results
 
 Every episode of ``OUT`` is looked up in the reference by (policy, target, seed) and
-compared in every column of ``episodes.csv`` but ``wall_s``, and by its trace and target
-in ``traces.npz`` (array equality: the bits). Prints, per policy, how many episodes are
-equal, then each that is not with its differing columns; exits 1 if any differs or is
-missing from the reference. Episodes of the reference that ``OUT`` did not lay are not
-counted (``OUT`` may be a subset: fewer policies, targets or seeds).
+compared in every field of ``episodes.json`` but ``wall_s`` (its floats are written to
+round-trip, so equal means the same float64 bits; ``episodes.csv`` prints 6 digits), and
+by its trace and target in ``traces.npz`` (array equality of the stored float32).
+Prints, per policy, how many episodes are equal, then each that is not with its
+differing fields; exits 1 if any differs or is missing from the reference. Episodes of
+the reference that ``OUT`` did not lay are not counted (``OUT`` may be a subset: fewer
+policies, targets or seeds).
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
+import json
 import sys
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 #: Columns that are allowed to differ: the wall time of an episode.
 IGNORED = ("wall_s",)
 
-Key = tuple[str, str, str]
 
-
-def episodes(path: Path) -> tuple[list[dict[str, str]], dict[str, np.ndarray]]:
-    """``path/episodes.csv``'s rows, and ``traces.npz``'s arrays ({} if absent)."""
-    with (path / "episodes.csv").open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
+def episodes(path: Path) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """``path/episodes.json``'s rows, and ``traces.npz``'s arrays ({} if absent)."""
+    rows = json.loads((path / "episodes.json").read_text())
     npz = path / "traces.npz"
     if not npz.is_file():
         return rows, {}
@@ -50,11 +50,12 @@ def differences(new: Path, ref: Path) -> tuple[Counter, Counter, list[str]]:
     where = {(r["policy"], r["target"], r["seed"]): i for i, r in enumerate(ref_rows)}
     total, equal, lines = Counter(), Counter(), []
     for i, row in enumerate(rows):
-        key: Key = (row["policy"], row["target"], row["seed"])
+        key = (row["policy"], row["target"], row["seed"])
+        name = f"{key[0]} {key[1]} seed {key[2]}"
         total[key[0]] += 1
         j = where.get(key)
         if j is None:
-            lines.append(f"{' '.join(key)}: not in {ref}")
+            lines.append(f"{name}: not in {ref}")
             continue
         other = ref_rows[j]
         what = [c for c in sorted(set(row) | set(other))
@@ -63,7 +64,7 @@ def differences(new: Path, ref: Path) -> tuple[Counter, Counter, list[str]]:
                  if f"{name}_{i}" in arrays and not np.array_equal(
                      arrays[f"{name}_{i}"], ref_arrays.get(f"{name}_{j}"))]  # fmt: skip
         if what:
-            lines.append(f"{' '.join(key)}: {', '.join(what)} (score {row.get('score')} "
+            lines.append(f"{name}: {', '.join(what)} (score {row.get('score')} "
                          f"against {other.get('score')})")  # fmt: skip
         else:
             equal[key[0]] += 1
@@ -77,8 +78,8 @@ def main(argv: list[str] | None = None) -> int:
                    "(e.g. training/results)")  # fmt: skip
     args = p.parse_args(argv)
     for d in (args.new, args.reference):
-        if not (d / "episodes.csv").is_file():
-            p.error(f"{d} has no episodes.csv: pass a cnt-evaluate --out directory")
+        if not (d / "episodes.json").is_file():
+            p.error(f"{d} has no episodes.json: pass a cnt-evaluate --out directory")
     total, equal, lines = differences(args.new, args.reference)
     for policy, n in total.items():
         print(f"{policy:<16} {equal[policy]:>4} of {n:>4} episodes equal")

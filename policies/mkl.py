@@ -24,8 +24,10 @@ surrogate, ~450 ms on the model) dominates both.
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 #: The MKL branch importing :mod:`policies` asks for (unless ``MKL_CBWR`` is set).
@@ -40,10 +42,10 @@ _BRANCH_MASK = 1
 _NAMES = {1: "OFF", 2: "AUTO", 3: "COMPATIBLE"}
 
 
-def active_branch() -> str | None:
-    """The branch MKL runs in this process ("COMPATIBLE", "AUTO", "OFF": MKL's own choice,
-    or ``"code N"``), or None where torch's library has no MKL service (not x86, not
-    Linux). Reading it fixes it: MKL settles its branch at its first call."""
+@functools.cache
+def _cbwr_get() -> Callable[[int], int] | None:
+    """MKL's ``mkl_serv_cbwr_get`` in torch's library, or None where it has none (not x86,
+    not Linux)."""
     try:
         import torch
 
@@ -52,6 +54,16 @@ def active_branch() -> str | None:
     except (ImportError, OSError, AttributeError):
         return None
     get.restype, get.argtypes = ctypes.c_int, [ctypes.c_int]
+    return get
+
+
+def active_branch() -> str | None:
+    """The branch MKL runs in this process ("COMPATIBLE", "AUTO", "OFF": MKL's own choice,
+    or ``"code N"``), or None where torch's library has no MKL service. Reading it fixes
+    it: MKL settles its branch at its first call."""
+    get = _cbwr_get()
+    if get is None:
+        return None
     code = get(_BRANCH_MASK)
     return _NAMES.get(code, f"code {code}")
 
